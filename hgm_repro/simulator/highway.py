@@ -1,0 +1,402 @@
+"""The batched heterogeneous-traffic highway: one `step` advances every env by one decision.
+
+No Python loop runs over vehicles or envs; the only loop is over the physics sub-steps of a
+decision (5 by default). Works on any torch device: keep the state and the actions there.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from .config import HOST_TYPE, ScenarioConfig, SimulatorConfig
+from .neighbours import NONE, Neighbours, gather_vehicles, lane_occupancy, nearest_per_lane
+from .reward import RewardTerms, speed_reward
+from .state import HOST, Action, TrafficState
+
+INF = float("inf")
+
+
+@dataclass
+class StepResult:
+    """What one decision produced, per env ([N] tensors)."""
+
+    reward: torch.Tensor
+    terms: RewardTerms
+    terminated: torch.Tensor  # host collision
+    truncated: torch.Tensor  # episode time is up
+    lane_change: torch.Tensor  # the host started a lane change
+    overtakes: torch.Tensor  # vehicles overtaken by the host in this decision
+    dangerous: torch.Tensor
+    collision: torch.Tensor
+    episode: dict[str, torch.Tensor]  # per-episode metrics, valid where terminated | truncated
+
+    @property
+    def done(self) -> torch.Tensor:
+        return self.terminated | self.truncated
+
+
+class HighwaySimulator:
+    """Holds the parameters, the random generator and the state of `n_envs` envs."""
+
+    def __init__(self, config: SimulatorConfig, scenario: ScenarioConfig, n_envs: int,
+                 device: torch.device | str = "cpu", seed: int = 0):
+        if not isinstance(n_envs, int) or n_envs < 1:
+            raise ValueError(f"n_envs={n_envs!r} is not allowed: need a whole number >= 1")
+        self.config = config
+        self.scenario = scenario
+        self.n_envs = n_envs
+        self.device = torch.device(device)
+        self.generator = torch.Generator(device=self.device)
+        self.generator.manual_seed(int(seed))
+        self.host_safety_layer = config.host_safety_layer
+        self._build_type_tables()
+        self.state = self._initial_state(torch.ones(n_envs, dtype=torch.bool, device=self.device), None)
+
+    # ----------------------------------------------------------------------------------- setup
+    def _build_type_tables(self) -> None:
+        c, d = self.config, self.device
+        types = c.vehicle_types
+
+        def table(attr: str) -> torch.Tensor:
+            return torch.tensor([float(getattr(t, attr)) for t in types], device=d)
+
+        self.a_lon_t = table("a_lon")
+        self.v_lat_t = table("v_lat")
+        self.r_lon_t = table("r_lon")
+        self.r_lat_t = table("r_lat")
+        self.half_len_t = table("length") / 2
+        self.half_wid_t = table("width") / 2
+        self.gap_time_t = table("lane_change_time_gap")
+        self.connected_t = torch.tensor([t.connected for t in types], device=d)
+        probs = torch.tensor([self.scenario.ratio_of(t.name) if t.name != HOST_TYPE else 0.0 for t in types],
+                             device=d)
+        self.spawn_probs = probs / probs.sum()
+        self.lane_centres = (torch.arange(c.lanes, device=d, dtype=torch.float32) + 0.5) * c.lane_width
+
+    def _rand(self, *shape: int) -> torch.Tensor:
+        return torch.rand(*shape, generator=self.generator, device=self.device)
+
+    def _draw_types(self, *shape: int) -> torch.Tensor:
+        flat = torch.multinomial(self.spawn_probs.expand(int(torch.tensor(shape).prod()), -1), 1,
+                                 replacement=True, generator=self.generator)
+        return flat.reshape(*shape)
+
+    def _draw_colors(self, *shape: int) -> torch.Tensor:
+        # Bright, saturated colours drawn independently of the type, so that pixels never tell
+        # a connected vehicle from a human-driven one.
+        hue = self._rand(*shape)
+        k = (torch.arange(3, device=self.device) / 3.0)
+        rgb = 0.5 + 0.5 * torch.cos(2 * torch.pi * (hue.unsqueeze(-1) + k))
+        return (40 + 200 * rgb).to(torch.uint8)
+
+    def _initial_state(self, mask: torch.Tensor, old: TrafficState | None) -> TrafficState:
+        """A fresh episode for envs where `mask` is True (others copied from `old`)."""
+        c, d, n = self.config, self.device, self.n_envs
+        per_lane, lanes = c.vehicles_per_lane, c.lanes
+        span = c.window_behind + c.window_ahead
+        spacing = span / per_lane
+        # Vehicles start on a jittered grid: every lane evenly filled, no overlap by construction.
+        base = -c.window_behind + (torch.arange(per_lane, device=d) + 0.5) * spacing
+        jitter = (self._rand(n, lanes, per_lane) * 2 - 1) * 0.2 * spacing
+        pos_lon = (base.view(1, 1, -1) + jitter).reshape(n, lanes * per_lane)
+        lane = torch.arange(lanes, device=d).repeat_interleave(per_lane).expand(n, -1).clone()
+        # The grid slot nearest the origin in the host's start lane becomes the host, moved to slot 0.
+        host_slot = c.host_start_lane * per_lane + int(base.abs().argmin())
+        perm = torch.arange(lanes * per_lane, device=d)
+        perm[0], perm[host_slot] = host_slot, 0
+        pos_lon, lane = pos_lon[:, perm], lane[:, perm]
+        pos_lon[:, HOST] = 0.0
+        vtype = self._draw_types(n, lanes * per_lane)
+        vtype[:, HOST] = 0
+        speed = c.v_min + self._rand(n, lanes * per_lane) * (c.v_max - c.v_min)
+        speed[:, HOST] = c.host_start_speed_kmh / 3.6
+        m = lanes * per_lane
+        zeros_f = torch.zeros(n, device=d)
+        fresh = TrafficState(
+            pos_lon=pos_lon, pos_lat=self.lane_centres[lane], speed=speed, target_lane=lane, vtype=vtype,
+            active=torch.ones(n, m, dtype=torch.bool, device=d), color=self._draw_colors(n, m),
+            was_ahead=pos_lon > 0, passed=torch.zeros(n, m, dtype=torch.bool, device=d),
+            decision=torch.zeros(n, dtype=torch.long, device=d),
+            ep_speed_sum=zeros_f.clone(), ep_lane_changes=zeros_f.clone(), ep_overtakes=zeros_f.clone(),
+            ep_collisions=zeros_f.clone(), ep_dangerous=zeros_f.clone(), ep_distance=zeros_f.clone(),
+            ep_return=zeros_f.clone(),
+            npc_collisions=zeros_f.clone(), npc_distance=zeros_f.clone(),
+        )
+        fresh.color[:, HOST] = torch.tensor([230, 30, 30], dtype=torch.uint8, device=d)  # the paper's red host
+        if old is None:
+            return fresh
+        out = {}
+        for k, new_v in fresh.tensors().items():
+            old_v = getattr(old, k)
+            if k in ("npc_collisions", "npc_distance"):
+                out[k] = old_v
+                continue
+            msk = mask.view(-1, *([1] * (new_v.dim() - 1)))
+            out[k] = torch.where(msk, new_v, old_v)
+        return TrafficState(**out)
+
+    # ----------------------------------------------------------------------------------- api
+    def reset(self, mask: torch.Tensor | None = None) -> TrafficState:
+        """Start new episodes in the envs where `mask` is True (all envs when None)."""
+        if mask is None:
+            mask = torch.ones(self.n_envs, dtype=torch.bool, device=self.device)
+        self.state = self._initial_state(mask.to(self.device).reshape(-1), self.state)
+        return self.state
+
+    def neighbours(self, state: TrafficState | None = None) -> Neighbours:
+        s = self.state if state is None else state
+        occ = lane_occupancy(s.pos_lat, self.half_wid_t[s.vtype], s.target_lane, s.active,
+                             self.config.lanes, self.config.lane_width)
+        return nearest_per_lane(s.pos_lon, occ)
+
+    def npc_actions(self, state: TrafficState) -> torch.Tensor:
+        """Table 1's random behaviour: a random lane change with probability r_lat, else a random
+        longitudinal action with probability r_lon, else no action."""
+        n, m = state.pos_lon.shape
+        u_lat, u_lon, u_dir = self._rand(n, m), self._rand(n, m), self._rand(n, m)
+        r_lat, r_lon = self.r_lat_t[state.vtype], self.r_lon_t[state.vtype]
+        act = torch.full((n, m), int(Action.NO_ACTION), device=self.device, dtype=torch.long)
+        lon_act = torch.where(u_dir < 0.5, int(Action.ACCELERATE), int(Action.DECELERATE))
+        lat_act = torch.where(u_dir < 0.5, int(Action.LANE_LEFT), int(Action.LANE_RIGHT))
+        act = torch.where(u_lon < r_lon, lon_act, act)
+        return torch.where(u_lat < r_lat, lat_act, act)
+
+    def step(self, host_action: torch.Tensor) -> StepResult:
+        """Advance every env by one decision; `host_action` is [N] of `Action` values."""
+        c, s = self.config, self.state
+        n, m = s.pos_lon.shape
+        d = self.device
+        host_action = host_action.to(d).reshape(n).long()
+        v_min, v_max = c.v_min, c.v_max
+        half_len, half_wid = self.half_len_t[s.vtype], self.half_wid_t[s.vtype]
+        a_lon, v_lat = self.a_lon_t[s.vtype], self.v_lat_t[s.vtype]
+
+        actions = self.npc_actions(s)
+        actions[:, HOST] = host_action
+        # Which vehicles obey the safety layer: every NPC, and the host only when asked to.
+        guarded = torch.ones(n, m, dtype=torch.bool, device=d)
+        guarded[:, HOST] = self.host_safety_layer
+
+        # --- lane changes (eq. 3): start only when none is under way and the lane exists.
+        nb = self.neighbours(s)
+        centre = self.lane_centres[s.target_lane]
+        changing = (s.pos_lat - centre).abs() > 1e-4
+        wants_left = actions == int(Action.LANE_LEFT)
+        wants_right = actions == int(Action.LANE_RIGHT)
+        wants = wants_left | wants_right
+        desired = s.target_lane - wants_left.long() + wants_right.long()
+        off_road = wants & ((desired < 0) | (desired >= c.lanes))
+        desired_c = desired.clamp(0, c.lanes - 1)
+        lead_t = nb.lead.gather(2, desired_c.unsqueeze(-1)).squeeze(-1)
+        follow_t = nb.follow.gather(2, desired_c.unsqueeze(-1)).squeeze(-1)
+        front_gap = gather_vehicles(s.pos_lon, lead_t, INF) - s.pos_lon - half_len \
+            - gather_vehicles(half_len, lead_t, 0.0)
+        rear_gap = s.pos_lon - gather_vehicles(s.pos_lon, follow_t, -INF) - half_len \
+            - gather_vehicles(half_len, follow_t, 0.0)
+        rear_speed = gather_vehicles(s.speed, follow_t, 0.0)
+        lead_speed_t = gather_vehicles(s.speed, lead_t, INF)
+        accept_t = self.gap_time_t[s.vtype]
+        s0, tau = c.safety.min_gap, c.safety.reaction_time
+        gap_ok = (front_gap >= s0 + accept_t * s.speed + (s.speed - lead_speed_t).clamp(min=0) * tau) & \
+                 (rear_gap >= s0 + accept_t * rear_speed + (rear_speed - s.speed).clamp(min=0) * tau)
+        # Guarded drivers change to the left only on even decisions and to the right only on
+        # odd ones, so that two of them never merge into the same lane from both sides at once.
+        even = (s.decision % 2 == 0).unsqueeze(1)
+        direction_ok = torch.where(even, wants_left, wants_right)
+        start = wants & ~changing & ~off_road & (~guarded | (gap_ok & direction_ok))
+        target_lane = torch.where(start, desired_c, s.target_lane)
+
+        # --- longitudinal command (eq. 2); NPCs pushed below v_min by braking work back up.
+        accel_cmd = torch.zeros(n, m, device=d)
+        accel_cmd = torch.where(actions == int(Action.ACCELERATE), a_lon, accel_cmd)
+        accel_cmd = torch.where(actions == int(Action.DECELERATE), -a_lon, accel_cmd)
+        accel_cmd = torch.where(guarded & (s.speed < v_min - 1e-6), a_lon, accel_cmd)
+
+        # --- physics sub-steps
+        nb2 = nearest_per_lane(s.pos_lon, lane_occupancy(s.pos_lat, half_wid, target_lane, s.active,
+                                                          c.lanes, c.lane_width))
+        lead_any = nb2.lead  # [N, M, L]; order along the road does not change within a decision
+        occ = nb2.occupancy
+        dt = c.physics_dt
+        b = c.safety.emergency_decel
+        pos_lon, pos_lat, speed = s.pos_lon.clone(), s.pos_lat.clone(), s.speed.clone()
+        target_lat = self.lane_centres[target_lane]
+        hit = torch.zeros(n, m, dtype=torch.bool, device=d)
+        npc_crashes = torch.zeros(n, device=d)
+        is_host = torch.arange(m, device=d) == HOST
+        start_pos = pos_lon.clone()
+        for _ in range(c.substeps):
+            lead_pos = gather_vehicles(pos_lon, lead_any, INF)
+            lead_lat = gather_vehicles(pos_lat, lead_any, 0.0)
+            lead_hl = gather_vehicles(half_len, lead_any, 0.0)
+            lead_hw = gather_vehicles(half_wid, lead_any, 0.0)
+            lead_v = gather_vehicles(speed, lead_any, 0.0)
+            gap = torch.where(occ, lead_pos - pos_lon.unsqueeze(-1) - half_len.unsqueeze(-1) - lead_hl, INF)
+            # Collisions: a leader in a shared lane whose body overlaps ours. A pair is (i, lead).
+            overlap = occ & (lead_any >= 0) & (gap < 0) & \
+                ((lead_lat - pos_lat.unsqueeze(-1)).abs() < lead_hw + half_wid.unsqueeze(-1))
+            host_pair = overlap & (is_host.view(1, m, 1) | (lead_any == HOST))
+            in_host_crash = self._involved(host_pair, lead_any)
+            in_npc_crash = self._involved(overlap & ~host_pair, lead_any)
+            # Each NPC-NPC crash involves two vehicles: count new ones once.
+            npc_crashes = npc_crashes + (in_npc_crash & ~hit).sum(1).float() / 2
+            hit = hit | in_host_crash | in_npc_crash
+            # Longitudinal: eq. 2 for everyone, then the Krauss safe speed for guarded drivers.
+            v_cmd = speed + accel_cmd * dt
+            v_cmd = torch.where(accel_cmd > 0, torch.minimum(v_cmd, speed.clamp(min=v_max)), v_cmd)
+            v_cmd = torch.where(accel_cmd < 0, torch.maximum(v_cmd, speed.clamp(max=v_min)), v_cmd)
+            g = (gap - s0).clamp(min=0)
+            v_l = lead_v
+            v_safe = v_l + (g - v_l * tau) / ((speed.unsqueeze(-1) + v_l) / (2 * b) + tau)
+            v_safe = torch.where(torch.isfinite(gap), v_safe, INF).amin(-1)
+            v_guard = torch.maximum(torch.minimum(v_cmd, v_safe), (speed - b * dt).clamp(min=0))
+            v_new = torch.where(guarded, v_guard, v_cmd)
+            v_new = torch.where(s.active, v_new, speed)
+            pos_lon = pos_lon + 0.5 * (speed + v_new) * dt
+            speed = v_new
+            # Lateral (eq. 3): v_lat towards the target lane's centre, stopping there.
+            dlat = target_lat - pos_lat
+            pos_lat = pos_lat + dlat.sign() * torch.minimum(dlat.abs(), v_lat * dt)
+        lead_pos = gather_vehicles(pos_lon, lead_any, INF)
+        lead_hl = gather_vehicles(half_len, lead_any, 0.0)
+        final_gap = torch.where(occ, lead_pos - pos_lon.unsqueeze(-1) - half_len.unsqueeze(-1) - lead_hl, INF)
+
+        # --- host events
+        host_collision = hit[:, HOST]
+        host_pos = pos_lon[:, HOST]
+        ahead_now = pos_lon > host_pos.unsqueeze(1)
+        overtaken = s.was_ahead & ~ahead_now & ~s.passed & s.active
+        overtaken[:, HOST] = False
+        n_overtakes = overtaken.sum(1).float()
+        host_v = speed[:, HOST].clamp(min=1e-3)
+        th = c.reward.dangerous_time_gap
+        tailgating = final_gap[:, HOST].amin(-1) / host_v < th
+        host_start = start[:, HOST]
+        cut_in = host_start & (rear_gap[:, HOST] / rear_speed[:, HOST].clamp(min=1e-3) < th)
+        dangerous = tailgating | cut_in | off_road[:, HOST]
+
+        terms = RewardTerms(
+            speed=speed_reward(speed[:, HOST], v_min, v_max),
+            collision=host_collision.float() * c.reward.collision,
+            dangerous=dangerous.float() * c.reward.dangerous,
+            lane_change=host_start.float() * c.reward.lane_change,
+            overtake=(n_overtakes if c.reward.overtake_per_vehicle else (n_overtakes > 0).float())
+            * c.reward.overtake,
+        )
+        reward = terms.total()
+
+        # --- bookkeeping
+        travelled = pos_lon - start_pos
+        decision = s.decision + 1
+        ep = dict(
+            ep_speed_sum=s.ep_speed_sum + speed[:, HOST],
+            ep_lane_changes=s.ep_lane_changes + host_start.float(),
+            ep_overtakes=s.ep_overtakes + n_overtakes,
+            ep_collisions=s.ep_collisions + host_collision.float(),
+            ep_dangerous=s.ep_dangerous + dangerous.float(),
+            ep_distance=s.ep_distance + travelled[:, HOST],
+            ep_return=s.ep_return + reward,
+        )
+        npc_collisions = s.npc_collisions + npc_crashes
+        npc_distance = s.npc_distance + (travelled[:, 1:] * s.active[:, 1:]).sum(1)
+
+        # --- NPCs that crashed or left the window wait for a free spot at the far edge.
+        active = s.active & ~(hit & (torch.arange(m, device=d) != HOST))
+        rel = pos_lon - host_pos.unsqueeze(1)
+        left_behind = rel < -c.window_behind
+        left_ahead = rel > c.window_ahead
+        active = active & ~left_behind & ~left_ahead
+        active[:, HOST] = True
+        self.state = TrafficState(
+            pos_lon=pos_lon, pos_lat=pos_lat, speed=speed, target_lane=target_lane, vtype=s.vtype,
+            active=active, color=s.color, was_ahead=ahead_now, passed=s.passed | overtaken,
+            decision=decision, npc_collisions=npc_collisions, npc_distance=npc_distance, **ep,
+        )
+        # Who fell behind comes back ahead and vice versa; crashed NPCs by the side they were on.
+        spawn_front = ~active & (left_behind | (~left_ahead & (rel <= 0)))
+        self._respawn(~active & spawn_front, front=True)
+        self._respawn(~self.state.active & ~spawn_front, front=False)
+
+        terminated = host_collision
+        truncated = (decision >= c.episode_decisions) & ~terminated
+        done = terminated | truncated
+        st = self.state
+        episode = {
+            "avg_speed_kmh": st.ep_speed_sum / decision.clamp(min=1) * 3.6,
+            "lane_changes": st.ep_lane_changes,
+            "overtakes": st.ep_overtakes,
+            "collisions": st.ep_collisions,
+            "dangerous_actions": st.ep_dangerous,
+            "distance_m": st.ep_distance,
+            "episode_return": st.ep_return,
+            "decisions": decision.float(),
+        }
+        return StepResult(reward=reward, terms=terms, terminated=terminated, truncated=truncated & done,
+                          lane_change=host_start, overtakes=n_overtakes, dangerous=dangerous,
+                          collision=host_collision, episode=episode)
+
+    # ----------------------------------------------------------------------------------- spawning
+    @staticmethod
+    def _involved(pairs: torch.Tensor, lead: torch.Tensor) -> torch.Tensor:
+        """[N, M] bool: vehicles on either side of a True (vehicle, lead in lane) pair."""
+        n, m, _ = pairs.shape
+        as_lead = torch.zeros(n, m, device=pairs.device).scatter_add_(
+            1, lead.clamp(min=0).reshape(n, -1), pairs.reshape(n, -1).float())
+        return pairs.any(-1) | (as_lead > 0)
+
+    def _respawn(self, candidates: torch.Tensor, front: bool) -> None:
+        """Bring back at most one waiting vehicle per env among `candidates`, at the front edge of
+        the window or at its rear edge. The lane is drawn among those with a safe gap to the
+        nearest vehicle there; where no lane is free the vehicle waits for the next decision."""
+        c, s, d = self.config, self.state, self.device
+        n, m = s.pos_lon.shape
+        if not bool(candidates.any()):
+            return
+        slot_idx = torch.arange(m, device=d)
+        # The waiting vehicle with the lowest slot index in each env.
+        slot = torch.where(candidates, slot_idx, m).amin(1)
+        has = slot < m
+        slot = slot.clamp(max=m - 1)
+        host_pos = s.pos_lon[:, HOST]
+        margin = 5.0
+        spawn_pos = host_pos + (c.window_ahead - margin if front else -c.window_behind + margin)
+        new_type = self._draw_types(n)
+        new_speed = c.v_min + self._rand(n) * (c.v_max - c.v_min)
+        hl_new = self.half_len_t[new_type]
+        # Nearest active occupant of each lane on the inner side of the spawn point.
+        half_len, half_wid = self.half_len_t[s.vtype], self.half_wid_t[s.vtype]
+        occ = lane_occupancy(s.pos_lat, half_wid, s.target_lane, s.active, c.lanes, c.lane_width)  # [N,M,L]
+        pos = s.pos_lon.unsqueeze(-1)
+        # The newcomer never closes in on its neighbour at spawn: ahead of the field it drives at
+        # least as fast as the vehicle behind it, behind the field at most as fast as the one ahead.
+        if front:
+            near_pos, near_idx = torch.where(occ, pos, -INF).max(1)  # [N, L]
+            gap = spawn_pos.unsqueeze(1) - near_pos - hl_new.unsqueeze(1) - half_len.gather(1, near_idx)
+            lane_speed = torch.maximum(new_speed.unsqueeze(1), s.speed.gather(1, near_idx))
+            need = c.safety.min_gap + 0.5 * s.speed.gather(1, near_idx)
+        else:
+            near_pos, near_idx = torch.where(occ, pos, INF).min(1)
+            gap = near_pos - spawn_pos.unsqueeze(1) - hl_new.unsqueeze(1) - half_len.gather(1, near_idx)
+            lane_speed = torch.minimum(new_speed.unsqueeze(1), s.speed.gather(1, near_idx))
+            need = c.safety.min_gap + 0.5 * lane_speed
+        free = gap >= need  # [N, L]; a lane with nobody in it gives gap = inf
+        score = torch.where(free, self._rand(n, c.lanes), -1.0)
+        lane = score.argmax(1)
+        new_speed = torch.where(torch.isfinite(gap.gather(1, lane[:, None])).squeeze(1),
+                                lane_speed.gather(1, lane[:, None]).squeeze(1), new_speed)
+        ok = has & free.any(1)
+        if not bool(ok.any()):
+            return
+        rows = torch.nonzero(ok).squeeze(1)
+        cols = slot[rows]
+        s.pos_lon[rows, cols] = spawn_pos[rows]
+        s.pos_lat[rows, cols] = self.lane_centres[lane[rows]]
+        s.speed[rows, cols] = new_speed[rows]
+        s.target_lane[rows, cols] = lane[rows]
+        s.vtype[rows, cols] = new_type[rows]
+        s.active[rows, cols] = True
+        s.color[rows, cols] = self._draw_colors(rows.numel())
+        s.was_ahead[rows, cols] = front
+        s.passed[rows, cols] = False
