@@ -51,6 +51,9 @@ class HighwaySimulator:
         self.generator = torch.Generator(device=self.device)
         self.generator.manual_seed(int(seed))
         self.host_safety_layer = config.host_safety_layer
+        # Switched off only to script situations by hand (tests, figures): vehicles that leave the
+        # window or crash then stay away instead of coming back at the far edge.
+        self.respawn = True
         self._build_type_tables()
         self.state = self._initial_state(torch.ones(n_envs, dtype=torch.bool, device=self.device), None)
 
@@ -73,15 +76,18 @@ class HighwaySimulator:
         probs = torch.tensor([self.scenario.ratio_of(t.name) if t.name != HOST_TYPE else 0.0 for t in types],
                              device=d)
         self.spawn_probs = probs / probs.sum()
+        self.spawn_cdf = self.spawn_probs.cumsum(0)
+        self.spawn_cdf[-1] = 1.0  # guard against rounding: every u in [0, 1) finds a type
         self.lane_centres = (torch.arange(c.lanes, device=d, dtype=torch.float32) + 0.5) * c.lane_width
 
     def _rand(self, *shape: int) -> torch.Tensor:
         return torch.rand(*shape, generator=self.generator, device=self.device)
 
     def _draw_types(self, *shape: int) -> torch.Tensor:
-        flat = torch.multinomial(self.spawn_probs.expand(int(torch.tensor(shape).prod()), -1), 1,
-                                 replacement=True, generator=self.generator)
-        return flat.reshape(*shape)
+        # Inverse-CDF sampling: much cheaper than torch.multinomial for many small draws.
+        u = self._rand(*shape)
+        return torch.searchsorted(self.spawn_cdf, u.reshape(-1), right=True).clamp(max=len(self.spawn_cdf) - 1) \
+            .reshape(*shape)
 
     def _draw_colors(self, *shape: int) -> torch.Tensor:
         # Bright, saturated colours drawn independently of the type, so that pixels never tell
@@ -214,54 +220,48 @@ class HighwaySimulator:
         accel_cmd = torch.where(actions == int(Action.DECELERATE), -a_lon, accel_cmd)
         accel_cmd = torch.where(guarded & (s.speed < v_min - 1e-6), a_lon, accel_cmd)
 
-        # --- physics sub-steps
+        # --- physics sub-steps. The order along the road cannot change within a decision without a
+        # crash, so each vehicle's leaders are found once, in the (at most two) lanes it occupies.
         nb2 = nearest_per_lane(s.pos_lon, lane_occupancy(s.pos_lat, half_wid, target_lane, s.active,
                                                           c.lanes, c.lane_width))
-        lead_any = nb2.lead  # [N, M, L]; order along the road does not change within a decision
-        occ = nb2.occupancy
+        w = c.lane_width
+        lane_lo = torch.minimum(((s.pos_lat - half_wid) / w).floor().long(), target_lane).clamp(0, c.lanes - 1)
+        lane_hi = torch.maximum(((s.pos_lat + half_wid) / w).ceil().long() - 1, target_lane).clamp(0, c.lanes - 1)
+        lead = nb2.lead.gather(2, torch.stack([lane_lo, lane_hi], -1))  # [N, M, 2]
+        has_lead = (lead >= 0) & s.active.unsqueeze(-1)
+        len_sum = half_len.unsqueeze(-1) + gather_vehicles(half_len, lead, 0.0)
+        wid_sum = half_wid.unsqueeze(-1) + gather_vehicles(half_wid, lead, 0.0)
         dt = c.physics_dt
         b = c.safety.emergency_decel
-        pos_lon, pos_lat, speed = s.pos_lon.clone(), s.pos_lat.clone(), s.speed.clone()
+        pos_lon, pos_lat, speed = s.pos_lon, s.pos_lat, s.speed
         target_lat = self.lane_centres[target_lane]
         hit = torch.zeros(n, m, dtype=torch.bool, device=d)
         npc_crashes = torch.zeros(n, device=d)
-        is_host = torch.arange(m, device=d) == HOST
-        start_pos = pos_lon.clone()
+        start_pos = pos_lon
+        lat_step = v_lat * dt
         for _ in range(c.substeps):
-            lead_pos = gather_vehicles(pos_lon, lead_any, INF)
-            lead_lat = gather_vehicles(pos_lat, lead_any, 0.0)
-            lead_hl = gather_vehicles(half_len, lead_any, 0.0)
-            lead_hw = gather_vehicles(half_wid, lead_any, 0.0)
-            lead_v = gather_vehicles(speed, lead_any, 0.0)
-            gap = torch.where(occ, lead_pos - pos_lon.unsqueeze(-1) - half_len.unsqueeze(-1) - lead_hl, INF)
-            # Collisions: a leader in a shared lane whose body overlaps ours. A pair is (i, lead).
-            overlap = occ & (lead_any >= 0) & (gap < 0) & \
-                ((lead_lat - pos_lat.unsqueeze(-1)).abs() < lead_hw + half_wid.unsqueeze(-1))
-            host_pair = overlap & (is_host.view(1, m, 1) | (lead_any == HOST))
-            in_host_crash = self._involved(host_pair, lead_any)
-            in_npc_crash = self._involved(overlap & ~host_pair, lead_any)
-            # Each NPC-NPC crash involves two vehicles: count new ones once.
-            npc_crashes = npc_crashes + (in_npc_crash & ~hit).sum(1).float() / 2
-            hit = hit | in_host_crash | in_npc_crash
+            gap = torch.where(has_lead, gather_vehicles(pos_lon, lead, INF) - pos_lon.unsqueeze(-1) - len_sum, INF)
+            # Collisions: a leader in a shared lane whose body overlaps ours; a pair is (i, lead).
+            overlap = (gap < 0) & ((gather_vehicles(pos_lat, lead, 0.0) - pos_lat.unsqueeze(-1)).abs() < wid_sum)
+            if bool(overlap.any()):
+                hit, npc_crashes = self._record_crashes(overlap, lead, hit, npc_crashes)
             # Longitudinal: eq. 2 for everyone, then the Krauss safe speed for guarded drivers.
             v_cmd = speed + accel_cmd * dt
             v_cmd = torch.where(accel_cmd > 0, torch.minimum(v_cmd, speed.clamp(min=v_max)), v_cmd)
             v_cmd = torch.where(accel_cmd < 0, torch.maximum(v_cmd, speed.clamp(max=v_min)), v_cmd)
-            g = (gap - s0).clamp(min=0)
-            v_l = lead_v
-            v_safe = v_l + (g - v_l * tau) / ((speed.unsqueeze(-1) + v_l) / (2 * b) + tau)
-            v_safe = torch.where(torch.isfinite(gap), v_safe, INF).amin(-1)
+            v_l = gather_vehicles(speed, lead, 0.0)
+            v_safe = v_l + ((gap - s0).clamp(min=0) - v_l * tau) / ((speed.unsqueeze(-1) + v_l) / (2 * b) + tau)
+            v_safe = torch.where(has_lead, v_safe, INF).amin(-1)
             v_guard = torch.maximum(torch.minimum(v_cmd, v_safe), (speed - b * dt).clamp(min=0))
-            v_new = torch.where(guarded, v_guard, v_cmd)
-            v_new = torch.where(s.active, v_new, speed)
+            v_new = torch.where(guarded & s.active, v_guard, v_cmd)
             pos_lon = pos_lon + 0.5 * (speed + v_new) * dt
             speed = v_new
             # Lateral (eq. 3): v_lat towards the target lane's centre, stopping there.
             dlat = target_lat - pos_lat
-            pos_lat = pos_lat + dlat.sign() * torch.minimum(dlat.abs(), v_lat * dt)
-        lead_pos = gather_vehicles(pos_lon, lead_any, INF)
-        lead_hl = gather_vehicles(half_len, lead_any, 0.0)
-        final_gap = torch.where(occ, lead_pos - pos_lon.unsqueeze(-1) - half_len.unsqueeze(-1) - lead_hl, INF)
+            pos_lat = pos_lat + dlat.sign() * torch.minimum(dlat.abs(), lat_step)
+        host_lead = lead[:, HOST]
+        final_gap = torch.where(has_lead[:, HOST], gather_vehicles(pos_lon, host_lead, INF)
+                                - pos_lon[:, HOST:HOST + 1] - len_sum[:, HOST], INF)
 
         # --- host events
         host_collision = hit[:, HOST]
@@ -272,7 +272,7 @@ class HighwaySimulator:
         n_overtakes = overtaken.sum(1).float()
         host_v = speed[:, HOST].clamp(min=1e-3)
         th = c.reward.dangerous_time_gap
-        tailgating = final_gap[:, HOST].amin(-1) / host_v < th
+        tailgating = final_gap.amin(-1) / host_v < th
         host_start = start[:, HOST]
         cut_in = host_start & (rear_gap[:, HOST] / rear_speed[:, HOST].clamp(min=1e-3) < th)
         dangerous = tailgating | cut_in | off_road[:, HOST]
@@ -315,9 +315,10 @@ class HighwaySimulator:
             decision=decision, npc_collisions=npc_collisions, npc_distance=npc_distance, **ep,
         )
         # Who fell behind comes back ahead and vice versa; crashed NPCs by the side they were on.
-        spawn_front = ~active & (left_behind | (~left_ahead & (rel <= 0)))
-        self._respawn(~active & spawn_front, front=True)
-        self._respawn(~self.state.active & ~spawn_front, front=False)
+        if self.respawn:
+            spawn_front = ~active & (left_behind | (~left_ahead & (rel <= 0)))
+            self._respawn(~active & spawn_front, front=True)
+            self._respawn(~self.state.active & ~spawn_front, front=False)
 
         terminated = host_collision
         truncated = (decision >= c.episode_decisions) & ~terminated
@@ -338,6 +339,17 @@ class HighwaySimulator:
                           collision=host_collision, episode=episode)
 
     # ----------------------------------------------------------------------------------- spawning
+    def _record_crashes(self, overlap: torch.Tensor, lead: torch.Tensor, hit: torch.Tensor,
+                        npc_crashes: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """Mark vehicles in overlapping (vehicle, lead) pairs; count new NPC-NPC crashes once each."""
+        m = overlap.shape[1]
+        is_host = torch.arange(m, device=overlap.device) == HOST
+        host_pair = overlap & (is_host.view(1, m, 1) | (lead == HOST))
+        in_host_crash = self._involved(host_pair, lead)
+        in_npc_crash = self._involved(overlap & ~host_pair, lead)
+        npc_crashes = npc_crashes + (in_npc_crash & ~hit).sum(1).float() / 2
+        return hit | in_host_crash | in_npc_crash, npc_crashes
+
     @staticmethod
     def _involved(pairs: torch.Tensor, lead: torch.Tensor) -> torch.Tensor:
         """[N, M] bool: vehicles on either side of a True (vehicle, lead in lane) pair."""

@@ -68,5 +68,5 @@ def gather_vehicles(values: torch.Tensor, index: torch.Tensor, fill: float) -> t
     n = values.shape[0]
     flat = index.reshape(n, -1)
     out = values.gather(1, flat.clamp(min=0))
-    out = torch.where(flat < 0, torch.full_like(out, fill), out)
+    out = torch.where(flat < 0, fill, out)
     return out.reshape(index.shape)
