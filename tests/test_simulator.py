@@ -256,9 +256,10 @@ def test_density_stays_constant():
 def test_episode_truncates_after_episode_time():
     sim = make_sim(n_envs=2, episode_seconds=5.0)
     sim.host_safety_layer = True
-    for k in range(10):
-        res = sim.step(torch.full((2,), int(Action.NO_ACTION)))
-    assert k == 9 and bool((res.done).all())
+    results = [sim.step(torch.full((2,), int(Action.NO_ACTION))) for _ in range(10)]
+    assert not any(bool(r.done.any()) for r in results[:-1])
+    res = results[-1]
+    assert bool(res.done.all())
     assert torch.equal(res.truncated, ~res.terminated)
     assert torch.allclose(res.episode["decisions"], torch.tensor([10.0, 10.0]))
 

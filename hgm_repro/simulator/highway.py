@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import torch
 
 from .config import HOST_TYPE, ScenarioConfig, SimulatorConfig
-from .neighbours import NONE, Neighbours, gather_vehicles, lane_occupancy, nearest_per_lane
+from .neighbours import Neighbours, gather_vehicles, lane_occupancy, nearest_per_lane
 from .reward import RewardTerms, speed_reward
 from .state import HOST, Action, TrafficState
 
