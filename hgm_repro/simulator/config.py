@@ -151,8 +151,12 @@ class SimulatorConfig:
         # The host's type comes first so that type index 0 always means the host.
         names = [HOST_TYPE] + [n for n in types_raw if n != HOST_TYPE]
         types = tuple(VehicleType.from_mapping(str(n), types_raw[n]) for n in names)
-        safety = SafetyConfig(**{k: _number(f"simulator.safety.{k}", v) for k, v in dict(raw.pop("safety", {})).items()})
-        reward_raw = dict(raw.pop("reward", {}))
+        safety_raw, reward_raw = dict(raw.pop("safety", {}) or {}), dict(raw.pop("reward", {}) or {})
+        for group, sub, klass in (("safety", safety_raw, SafetyConfig), ("reward", reward_raw, RewardConfig)):
+            unknown = set(sub) - set(klass.__dataclass_fields__)
+            _require(not unknown, f"simulator.{group} has unknown field(s) {sorted(unknown)}; "
+                                  f"allowed: {sorted(klass.__dataclass_fields__)}")
+        safety = SafetyConfig(**{k: _number(f"simulator.safety.{k}", v) for k, v in safety_raw.items()})
         reward = RewardConfig(**{k: (bool(v) if k == "overtake_per_vehicle" else _number(f"simulator.reward.{k}", v))
                                  for k, v in reward_raw.items()})
         cfg = cls(vehicle_types=types, safety=safety, reward=reward, **raw)
@@ -182,6 +186,11 @@ class SimulatorConfig:
                  f"need {self.v_min_kmh}..{self.v_max_kmh}")
         _require(self.safety.emergency_decel > 0 and self.safety.reaction_time > 0 and self.safety.min_gap >= 0,
                  "simulator.safety: emergency_decel and reaction_time must be > 0, min_gap >= 0")
+        for t in self.vehicle_types:
+            # The simulator tracks at most two lanes per vehicle (the one it leaves, the one it enters).
+            _require(t.width < self.lane_width,
+                     f"simulator.vehicle_types.{t.name}.width={t.width} is not allowed: must be narrower than "
+                     f"lane_width={self.lane_width}")
         _require(self.reward.dangerous_time_gap >= 0, "simulator.reward.dangerous_time_gap must be >= 0")
         _require(self.vehicles_per_lane >= 2,
                  f"simulator.density_per_km_per_lane={self.density_per_km_per_lane} gives fewer than 2 vehicles "
