@@ -121,7 +121,8 @@ class HighwaySimulator:
         m = lanes * per_lane
         zeros_f = torch.zeros(n, device=d)
         fresh = TrafficState(
-            pos_lon=pos_lon, pos_lat=self.lane_centres[lane], speed=speed, target_lane=lane, vtype=vtype,
+            pos_lon=pos_lon, pos_lat=self.lane_centres[lane], speed=speed, cruise=speed.clone(), target_lane=lane,
+            vtype=vtype,
             active=torch.ones(n, m, dtype=torch.bool, device=d), color=self._draw_colors(n, m),
             was_ahead=pos_lon > 0, passed=torch.zeros(n, m, dtype=torch.bool, device=d),
             decision=torch.zeros(n, dtype=torch.long, device=d),
@@ -215,10 +216,14 @@ class HighwaySimulator:
         target_lane = torch.where(start, desired_c, s.target_lane)
 
         # --- longitudinal command (eq. 2); NPCs pushed below v_min by braking work back up.
-        accel_cmd = torch.zeros(n, m, device=d)
-        accel_cmd = torch.where(actions == int(Action.ACCELERATE), a_lon, accel_cmd)
-        accel_cmd = torch.where(actions == int(Action.DECELERATE), -a_lon, accel_cmd)
-        accel_cmd = torch.where(guarded & (s.speed < v_min - 1e-6), a_lon, accel_cmd)
+        # Guarded drivers hold a cruise speed that their random actions move by a_lon per second;
+        # when the safety layer has braked them they work back up to it, so braking for others
+        # does not drag the whole traffic down to v_min over time.
+        accelerate, decelerate = actions == int(Action.ACCELERATE), actions == int(Action.DECELERATE)
+        dv = a_lon * c.decision_dt
+        cruise = (s.cruise + torch.where(accelerate, dv, 0.0) - torch.where(decelerate, dv, 0.0)).clamp(v_min, v_max)
+        accel_cmd = torch.where(accelerate, a_lon, torch.where(decelerate, -a_lon, 0.0))
+        accel_cmd = torch.where(guarded, ((cruise - s.speed) / c.decision_dt).clamp(-a_lon, a_lon), accel_cmd)
 
         # --- physics sub-steps. The order along the road cannot change within a decision without a
         # crash, so each vehicle's leaders are found once, in the (at most two) lanes it occupies.
@@ -310,7 +315,7 @@ class HighwaySimulator:
         active = active & ~left_behind & ~left_ahead
         active[:, HOST] = True
         self.state = TrafficState(
-            pos_lon=pos_lon, pos_lat=pos_lat, speed=speed, target_lane=target_lane, vtype=s.vtype,
+            pos_lon=pos_lon, pos_lat=pos_lat, speed=speed, cruise=cruise, target_lane=target_lane, vtype=s.vtype,
             active=active, color=s.color, was_ahead=ahead_now, passed=s.passed | overtaken,
             decision=decision, npc_collisions=npc_collisions, npc_distance=npc_distance, **ep,
         )
@@ -406,6 +411,7 @@ class HighwaySimulator:
         s.pos_lon[rows, cols] = spawn_pos[rows]
         s.pos_lat[rows, cols] = self.lane_centres[lane[rows]]
         s.speed[rows, cols] = new_speed[rows]
+        s.cruise[rows, cols] = new_speed[rows]
         s.target_lane[rows, cols] = lane[rows]
         s.vtype[rows, cols] = new_type[rows]
         s.active[rows, cols] = True

@@ -34,6 +34,7 @@ class TrafficState:
     pos_lon: torch.Tensor
     pos_lat: torch.Tensor
     speed: torch.Tensor
+    cruise: torch.Tensor  # speed the driver means to hold: random actions move it, safety braking does not
     target_lane: torch.Tensor  # lane the vehicle is in, or changing into
     vtype: torch.Tensor  # index into SimulatorConfig.vehicle_types
     active: torch.Tensor  # False while a vehicle waits to respawn (it is then invisible)

@@ -1,0 +1,193 @@
+"""Benchmark: how fast the simulator, the observation builders and the learner run here.
+
+    python -m hgm_repro.bench                 # everything that applies to this machine
+    python -m hgm_repro.bench --only simulator --n-envs 1,1024
+
+Prints one JSON object per measured configuration on stdout (progress goes to stderr), with at
+least `what`, `device`, `n_envs`, `camera`, `env_steps_per_s` (and `updates_per_s` for the
+learner). With the `highway` extra installed it measures highway-env's `highway-v0` (5 lanes,
+50 vehicles) in the same run, so the ratio is taken side by side on the same machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import time
+from collections.abc import Callable
+from typing import Any
+
+import torch
+
+from .simulator import HOST, HighwaySimulator
+from .simulator.loading import scenario_config, simulator_config
+
+OBS_VARIANTS = {  # name -> the model streams it stands for
+    "hgm": dict(camera="none", hgm="paper", coordinates=False),
+    "hgm_enriched": dict(camera="none", hgm="enriched", coordinates=False),
+    "camera": dict(camera="front", hgm="none", coordinates=False),
+    "birdseye": dict(camera="birdseye", hgm="none", coordinates=False),
+    "coordinates": dict(camera="none", hgm="none", coordinates=True),
+    "proposed": dict(camera="front", hgm="paper", coordinates=False),
+    "min": dict(camera="front", hgm="none", coordinates=False),
+    "coordinate_model": dict(camera="front", hgm="none", coordinates=True),
+}
+
+
+def _sync(device: torch.device) -> None:
+    if device.type == "cuda":
+        torch.cuda.synchronize(device)
+
+
+def _timed(fn: Callable[[], Any], device: torch.device, seconds: float, warmup: int = 3) -> tuple[int, float]:
+    """Calls fn until `seconds` have passed; returns (calls, elapsed)."""
+    for _ in range(warmup):
+        fn()
+    _sync(device)
+    calls, start = 0, time.perf_counter()
+    while True:
+        fn()
+        calls += 1
+        if calls % 5 == 0 or seconds <= 0:
+            _sync(device)
+            elapsed = time.perf_counter() - start
+            if elapsed >= seconds:
+                return calls, elapsed
+
+
+def _simulator(n_envs: int, device: torch.device, seed: int = 0) -> HighwaySimulator:
+    cfg = simulator_config(host_safety_layer=True)
+    return HighwaySimulator(cfg, scenario_config("train", cfg), n_envs, device=device, seed=seed)
+
+
+def bench_simulator(n_envs: int, device: torch.device, seconds: float) -> dict[str, Any]:
+    sim = _simulator(n_envs, device)
+
+    def one_step() -> None:
+        res = sim.step(sim.npc_actions(sim.state)[:, HOST])
+        sim.reset(res.done)
+
+    calls, elapsed = _timed(one_step, device, seconds)
+    return dict(what="simulator", device=str(device), n_envs=n_envs, camera="none", hgm="none",
+                env_steps_per_s=round(calls * n_envs / elapsed, 1))
+
+
+def bench_observations(variant: str, n_envs: int, device: torch.device, seconds: float,
+                       size: int = 84, frame_stack: int = 4) -> dict[str, Any]:
+    from .observations import ObservationBuilder, ObservationConfig
+
+    streams = OBS_VARIANTS[variant]
+    obs_cfg = ObservationConfig.from_config(dict(height=size, width=size, frame_stack=frame_stack), streams)
+    sim = _simulator(n_envs, device)
+    builder = ObservationBuilder(sim, obs_cfg)
+    builder.reset()
+
+    def one_step() -> None:
+        res = sim.step(sim.npc_actions(sim.state)[:, HOST])
+        builder.step()
+        if bool(res.done.any()):
+            sim.reset(res.done)
+            builder.reset(res.done)
+
+    calls, elapsed = _timed(one_step, device, seconds)
+    return dict(what=f"simulator+{variant}", device=str(device), n_envs=n_envs, camera=streams["camera"],
+                hgm=streams["hgm"], coordinates=streams["coordinates"], image=f"{size}x{size}",
+                frame_stack=frame_stack, env_steps_per_s=round(calls * n_envs / elapsed, 1))
+
+
+def bench_learner(device: torch.device, seconds: float, batch_size: int = 64, size: int = 84) -> list[dict[str, Any]]:
+    """Gradient updates per second of the paper's network at its batch size (Table 4)."""
+    from .learner.bench import update_rate  # the learner owns how an update is built
+
+    return update_rate(device=device, seconds=seconds, batch_size=batch_size, image_size=size)
+
+
+def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[str, Any] | None:
+    try:
+        import gymnasium as gym
+        import highway_env  # noqa: F401  (registers highway-v0)
+    except ImportError:
+        return None
+    config = {"lanes_count": 5, "vehicles_count": 50, "duration": 10_000}
+    if observation != "Kinematics":
+        config["observation"] = {"type": "GrayscaleObservation", "observation_shape": (84, 84),
+                                 "stack_size": 4, "weights": [0.2989, 0.5870, 0.1140]}
+    env = gym.make("highway-v0", config=config)
+    env.reset(seed=0)
+
+    def one_step() -> None:
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+
+    calls, elapsed = _timed(one_step, torch.device("cpu"), seconds, warmup=2)
+    env.close()
+    return dict(what="highway-env highway-v0", device="cpu", n_envs=1,
+                camera="none" if observation == "Kinematics" else "grayscale84", observation=observation,
+                env_steps_per_s=round(calls / elapsed, 1))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m hgm_repro.bench", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--only", choices=["simulator", "observations", "learner", "highway"], action="append",
+                        help="measure only these parts (repeatable); default: all")
+    parser.add_argument("--n-envs", default="1,64,256,1024,4096",
+                        help="comma-separated batch sizes for the simulator on CPU (default: %(default)s)")
+    parser.add_argument("--cuda-n-envs", default="1024,8192,32768",
+                        help="batch sizes for the simulator on CUDA, when a GPU is there (default: %(default)s)")
+    parser.add_argument("--obs-n-envs", type=int, default=256, help="batch size for observations (%(default)s)")
+    parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement (default: %(default)s)")
+    parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--device", choices=["cpu", "cuda", "all"], default="all",
+                        help="which devices to measure (default: every one present)")
+    args = parser.parse_args(argv)
+    if args.threads:
+        torch.set_num_threads(args.threads)
+    parts = set(args.only or ["simulator", "observations", "learner", "highway"])
+    devices = []
+    if args.device in ("cpu", "all"):
+        devices.append(torch.device("cpu"))
+    if args.device in ("cuda", "all") and torch.cuda.is_available():
+        devices.append(torch.device("cuda"))
+    elif args.device == "cuda":
+        parser.error("--device cuda asked for, but torch sees no CUDA device")
+
+    def emit(row: dict[str, Any] | None) -> None:
+        if row is None:
+            return
+        row.setdefault("torch_threads", torch.get_num_threads())
+        row.setdefault("host", platform.node())
+        print(json.dumps(row), flush=True)
+
+    for device in devices:
+        gpu = device.type == "cuda"
+        sizes = [int(x) for x in (args.cuda_n_envs if gpu else args.n_envs).split(",") if x]
+        if "simulator" in parts:
+            for n in sizes:
+                print(f"simulator n_envs={n} on {device}...", file=sys.stderr)
+                emit(bench_simulator(n, device, args.seconds))
+        if "observations" in parts:
+            n = max(sizes) if gpu else args.obs_n_envs
+            for variant in OBS_VARIANTS:
+                print(f"simulator+{variant} n_envs={n} on {device}...", file=sys.stderr)
+                emit(bench_observations(variant, n, device, args.seconds))
+        if "learner" in parts:
+            print(f"learner on {device}...", file=sys.stderr)
+            for row in bench_learner(device, args.seconds):
+                emit(row)
+    if "highway" in parts:
+        for observation in ("Kinematics", "Grayscale"):
+            print(f"highway-env ({observation})...", file=sys.stderr)
+            row = bench_highway_env(args.seconds, observation)
+            if row is None:
+                print("highway-env not installed: pip install -e '.[highway]' to compare", file=sys.stderr)
+                break
+            emit(row)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
