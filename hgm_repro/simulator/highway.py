@@ -16,6 +16,9 @@ from .reward import RewardTerms, speed_reward
 from .state import HOST, Action, TrafficState
 
 INF = float("inf")
+# Vehicles come back in a band this long (m) at each edge of the window, and leave only once
+# past it: spawning at one exact point would jam whenever every lane has a car there.
+SPAWN_ZONE = 20.0
 
 
 @dataclass
@@ -310,8 +313,8 @@ class HighwaySimulator:
         # --- NPCs that crashed or left the window wait for a free spot at the far edge.
         active = s.active & ~(hit & (torch.arange(m, device=d) != HOST))
         rel = pos_lon - host_pos.unsqueeze(1)
-        left_behind = rel < -c.window_behind
-        left_ahead = rel > c.window_ahead
+        left_behind = rel < -c.window_behind - SPAWN_ZONE
+        left_ahead = rel > c.window_ahead + SPAWN_ZONE
         active = active & ~left_behind & ~left_ahead
         active[:, HOST] = True
         self.state = TrafficState(
@@ -322,8 +325,9 @@ class HighwaySimulator:
         # Who fell behind comes back ahead and vice versa; crashed NPCs by the side they were on.
         if self.respawn:
             spawn_front = ~active & (left_behind | (~left_ahead & (rel <= 0)))
-            self._respawn(~active & spawn_front, front=True)
-            self._respawn(~self.state.active & ~spawn_front, front=False)
+            for _ in range(2):  # up to two newcomers per edge and decision
+                self._respawn(~self.state.active & spawn_front, front=True)
+                self._respawn(~self.state.active & ~spawn_front, front=False)
 
         terminated = host_collision
         truncated = (decision >= c.episode_decisions) & ~terminated
@@ -377,32 +381,38 @@ class HighwaySimulator:
         has = slot < m
         slot = slot.clamp(max=m - 1)
         host_pos = s.pos_lon[:, HOST]
-        margin = 5.0
-        spawn_pos = host_pos + (c.window_ahead - margin if front else -c.window_behind + margin)
+        edge = host_pos + (c.window_ahead if front else -c.window_behind)
         new_type = self._draw_types(n)
         new_speed = c.v_min + self._rand(n) * (c.v_max - c.v_min)
-        hl_new = self.half_len_t[new_type]
-        # Nearest active occupant of each lane on the inner side of the spawn point.
+        hl_new = self.half_len_t[new_type].unsqueeze(1)
+        # The outermost active occupant of each lane; the newcomer goes just beyond it with a safe
+        # gap (or at the edge when that is further out), if that is still inside the spawn band.
         half_len, half_wid = self.half_len_t[s.vtype], self.half_wid_t[s.vtype]
         occ = lane_occupancy(s.pos_lat, half_wid, s.target_lane, s.active, c.lanes, c.lane_width)  # [N,M,L]
         pos = s.pos_lon.unsqueeze(-1)
-        # The newcomer never closes in on its neighbour at spawn: ahead of the field it drives at
-        # least as fast as the vehicle behind it, behind the field at most as fast as the one ahead.
         if front:
             near_pos, near_idx = torch.where(occ, pos, -INF).max(1)  # [N, L]
-            gap = spawn_pos.unsqueeze(1) - near_pos - hl_new.unsqueeze(1) - half_len.gather(1, near_idx)
-            lane_speed = torch.maximum(new_speed.unsqueeze(1), s.speed.gather(1, near_idx))
-            need = c.safety.min_gap + 0.5 * s.speed.gather(1, near_idx)
         else:
             near_pos, near_idx = torch.where(occ, pos, INF).min(1)
-            gap = near_pos - spawn_pos.unsqueeze(1) - hl_new.unsqueeze(1) - half_len.gather(1, near_idx)
-            lane_speed = torch.minimum(new_speed.unsqueeze(1), s.speed.gather(1, near_idx))
-            need = c.safety.min_gap + 0.5 * lane_speed
-        free = gap >= need  # [N, L]; a lane with nobody in it gives gap = inf
+        near_speed = s.speed.gather(1, near_idx)
+        # The newcomer never closes in on its neighbour: ahead of the field it drives at least as
+        # fast as the vehicle behind it, behind the field at most as fast as the one ahead.
+        pick = torch.maximum if front else torch.minimum
+        lane_speed = pick(new_speed.unsqueeze(1), near_speed)
+        need = c.safety.min_gap + 0.5 * (near_speed if front else lane_speed) + hl_new + half_len.gather(1, near_idx)
+        empty = ~torch.isfinite(near_pos)
+        inner = edge.unsqueeze(1) - (5.0 if front else -5.0)
+        if front:
+            spot = torch.where(empty, inner, torch.maximum(inner, near_pos + need))
+            free = spot <= edge.unsqueeze(1) + SPAWN_ZONE - 5.0
+        else:
+            spot = torch.where(empty, inner, torch.minimum(inner, near_pos - need))
+            free = spot >= edge.unsqueeze(1) - SPAWN_ZONE + 5.0
         score = torch.where(free, self._rand(n, c.lanes), -1.0)
-        lane = score.argmax(1)
-        new_speed = torch.where(torch.isfinite(gap.gather(1, lane[:, None])).squeeze(1),
-                                lane_speed.gather(1, lane[:, None]).squeeze(1), new_speed)
+        lane = score.argmax(1, keepdim=True)
+        spawn_pos = spot.gather(1, lane).squeeze(1)
+        new_speed = torch.where(empty.gather(1, lane), new_speed.unsqueeze(1), lane_speed.gather(1, lane)).squeeze(1)
+        lane = lane.squeeze(1)
         ok = has & free.any(1)
         if not bool(ok.any()):
             return
