@@ -18,3 +18,10 @@ def make_env(cfg: Any, scenario_node: Any, n_envs: int, seed: int) -> Any:
     obs_cfg = ObservationConfig.from_config(cfg.observation, cfg.model.streams)
     return HeterogeneousHighwayEnv(sim_cfg, scenario, obs_cfg, n_envs=n_envs, device=torch.device(cfg.device),
                                    seed=seed)
+
+
+from .gym_env import ENV_ID, HeterogeneousHighwayGymEnv, register_envs  # noqa: E402
+
+register_envs()
+
+__all__ = ["ENV_ID", "HeterogeneousHighwayGymEnv", "make_env", "register_envs"]
