@@ -1,0 +1,68 @@
+"""Names, orders, colours and number formats shared by the figures, tables and report."""
+
+from __future__ import annotations
+
+import math
+
+import pandas as pd
+
+LEARNED = ("proposed", "min", "coordinate")
+REFERENCE_HOSTS = ("human", "idm_mobil")  # drawn as horizontal lines on the training figures
+MODEL_ORDER = ("proposed", "min", "coordinate", "human", "idm_mobil", "random")
+MODEL_LABELS = {
+    "proposed": "Proposed (HGM + camera)",
+    "min": "Min (camera only)",
+    "coordinate": "Coordinate (V2X vector)",
+    "human": "Human-driven host",
+    "idm_mobil": "IDM + MOBIL host",
+    "random": "Random host",
+}
+SHORT_LABELS = {"proposed": "Proposed", "min": "Min", "coordinate": "Coordinate", "human": "Human",
+                "idm_mobil": "IDM+MOBIL", "random": "Random"}
+PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "human": "#555555",
+           "idm_mobil": "#8c5fbf", "random": "#b08d57"}
+
+# Table 5: the connected-vehicle ratio of each test scenario.
+SCENARIOS = ("1", "2", "3", "4", "5")
+CV_RATIO = {"1": 0.0, "2": 0.25, "3": 0.5, "4": 0.75, "5": 1.0}
+
+METRIC_LABELS = {
+    "episode_return": "Episode return",
+    "avg_speed_kmh": "Mean speed (km/h)",
+    "lane_changes": "Lane changes per episode",
+    "overtakes": "Overtakes per episode",
+    "collisions": "Collisions per episode",
+    "dangerous_actions": "Dangerous actions per episode",
+    "distance_m": "Distance per episode (m)",
+    "loss": "TD loss",
+    "epsilon": "Exploration epsilon",
+    "steps_per_s": "Env steps per second",
+}
+METRIC_DIGITS = {"episode_return": 1, "avg_speed_kmh": 1, "lane_changes": 2, "overtakes": 2,
+                 "collisions": 3, "dangerous_actions": 2, "distance_m": 0}
+
+
+def model_label(model: str, short: bool = False) -> str:
+    table = SHORT_LABELS if short else MODEL_LABELS
+    return table.get(model, model)
+
+
+def ordered_models(models: object) -> list[str]:
+    """Known models in the paper's order first, then any user variant alphabetically."""
+    present = {str(m) for m in pd.Series(list(models)).dropna().unique()}
+    known = [m for m in MODEL_ORDER if m in present]
+    return known + sorted(present - set(known))
+
+
+def ordered_scenarios(scenarios: object) -> list[str]:
+    present = {str(s) for s in pd.Series(list(scenarios)).dropna().unique() if str(s)}
+    known = [s for s in SCENARIOS if s in present]
+    return known + sorted(present - set(known))
+
+
+def fmt(value: float, metric: str = "", digits: int | None = None) -> str:
+    """The one number format used everywhere (tables, claims, tests compare against it)."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "n/a"
+    d = METRIC_DIGITS.get(metric, 2) if digits is None else digits
+    return f"{value:.{d}f}"

@@ -1,0 +1,240 @@
+"""Read the MLflow tracking store into pandas tables.
+
+Only this module talks to MLflow; everything downstream works on the `StoreData` tables, so
+the figures, statistics and report can be tested on plain DataFrames.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+from mlflow import MlflowClient
+from mlflow.entities import ViewType
+
+# Metric names after the `eval/` prefix, in the order tables show them.
+EVAL_METRICS = (
+    "episode_return",
+    "avg_speed_kmh",
+    "lane_changes",
+    "overtakes",
+    "collisions",
+    "dangerous_actions",
+    "distance_m",
+)
+TAG_COLUMNS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "git_dirty")
+
+
+class EmptyStoreError(RuntimeError):
+    """The store holds no experiment of that name, or no run of it carries a `stage` tag."""
+
+
+@dataclass
+class StoreData:
+    """Everything the analysis reads from one experiment of a tracking store."""
+
+    tracking_uri: str
+    experiment: str
+    runs: pd.DataFrame  # one row per kept run: tags, status, params.<key>, metrics.<key>
+    curves: pd.DataFrame  # long: run_id, model, seed, train_key, metric, step, value
+    evals: pd.DataFrame  # one row per (model, scenario, seed): run_id and EVAL_METRICS columns
+    episodes: pd.DataFrame  # one row per evaluated episode: model, scenario, seed, episode, metrics
+    configs: dict[str, str] = field(default_factory=dict)  # model -> resolved config.yaml text
+    dropped: list[str] = field(default_factory=list)  # why runs were left out (duplicates, failures)
+
+    @property
+    def git_dirty(self) -> str:
+        """'true', 'false', 'mixed', or '' when the runs did not record it."""
+        flags = set(self.runs.get("git_dirty", pd.Series(dtype=str)).dropna().astype(str))
+        return "" if not flags else flags.pop() if len(flags) == 1 else "mixed"
+
+    @property
+    def git_commits(self) -> list[str]:
+        commits = self.runs.get("git_commit", pd.Series(dtype=str)).dropna().astype(str)
+        return sorted(c for c in commits.unique() if c)
+
+
+def default_tracking_uri() -> str:
+    # Same default as the main app: a SQLite file in the directory the command started from.
+    return f"sqlite:///{Path(os.getcwd()).resolve() / 'mlflow.db'}"
+
+
+def _seed_value(raw: object) -> object:
+    try:
+        return int(str(raw))
+    except (TypeError, ValueError):
+        return raw
+
+
+def _runs_frame(client: MlflowClient, experiment_id: str) -> pd.DataFrame:
+    rows = []
+    token = None
+    while True:
+        page = client.search_runs([experiment_id], run_view_type=ViewType.ACTIVE_ONLY, max_results=1000,
+                                  page_token=token)
+        for run in page:
+            tags = run.data.tags
+            row: dict[str, object] = {
+                "run_id": run.info.run_id,
+                "run_name": run.info.run_name,
+                "status": run.info.status,
+                "start_time": run.info.start_time or 0,
+                "parent_run_id": tags.get("mlflow.parentRunId"),
+            }
+            for tag in TAG_COLUMNS:
+                row[tag] = tags.get(tag)
+            row.update({f"params.{k}": v for k, v in run.data.params.items()})
+            row.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
+            rows.append(row)
+        token = page.token
+        if not token:
+            break
+    frame = pd.DataFrame(rows)
+    if frame.empty or "stage" not in frame:
+        return pd.DataFrame(columns=["run_id", "status", "start_time", *TAG_COLUMNS])
+    # Parent sweep runs carry no stage tag: they hold no results of their own.
+    frame = frame[frame["stage"].notna()].copy()
+    frame["seed"] = frame["seed"].map(_seed_value)
+    frame["scenario"] = frame["scenario"].astype("string").fillna("")
+    return frame.reset_index(drop=True)
+
+
+def _keep_latest(runs: pd.DataFrame, keys: list[str], what: str) -> tuple[pd.DataFrame, list[str]]:
+    """One run per key: the latest finished one, else the latest of any status.
+
+    Re-runs of the same cell (a crashed job restarted, a sweep repeated) would otherwise count
+    as extra seeds and shrink the confidence intervals.
+    """
+    if runs.empty:
+        return runs, []
+    ordered = runs.assign(_finished=runs["status"].eq("FINISHED"))
+    ordered = ordered.sort_values(["_finished", "start_time"], ascending=[False, False])
+    kept = ordered.drop_duplicates(keys, keep="first").drop(columns="_finished")
+    notes = []
+    n_dup = len(runs) - len(kept)
+    if n_dup:
+        notes.append(f"{n_dup} duplicate {what} run(s) for the same {'/'.join(keys)} left out (latest kept)")
+    unfinished = kept[~kept["status"].eq("FINISHED")]
+    if len(unfinished):
+        notes.append(f"{len(unfinished)} {what} run(s) not FINISHED used as they are "
+                     f"(status: {', '.join(sorted(unfinished['status'].unique()))})")
+    return kept.reset_index(drop=True), notes
+
+
+def _curves(client: MlflowClient, train_runs: pd.DataFrame) -> pd.DataFrame:
+    frames = []
+    # to_dict, not itertuples: column names such as "metrics.train/loss" are not identifiers.
+    for run in train_runs.to_dict("records"):
+        keys = [c[len("metrics."):] for c, v in run.items()
+                if c.startswith("metrics.train/") and v is not None and not pd.isna(v)]
+        for key in keys:
+            history = client.get_metric_history(run["run_id"], key)
+            if not history:
+                continue
+            frames.append(pd.DataFrame({
+                "run_id": run["run_id"],
+                "model": run["model"],
+                "seed": run["seed"],
+                "train_key": run["train_key"],
+                "metric": key.removeprefix("train/"),
+                "step": [m.step for m in history],
+                "value": [m.value for m in history],
+            }))
+    if not frames:
+        return pd.DataFrame(columns=["run_id", "model", "seed", "train_key", "metric", "step", "value"])
+    curves = pd.concat(frames, ignore_index=True)
+    return curves.sort_values(["model", "seed", "metric", "step"]).reset_index(drop=True)
+
+
+def _artifact_names(client: MlflowClient, run_id: str) -> set[str]:
+    try:
+        return {a.path for a in client.list_artifacts(run_id)}
+    except Exception:  # an unreachable artifact store must not stop the metric tables
+        return set()
+
+
+def _download_text(client: MlflowClient, run_id: str, name: str, tmp: Path) -> str | None:
+    try:
+        local = client.download_artifacts(run_id, name, str(tmp))
+        return Path(local).read_text()
+    except Exception:
+        return None
+
+
+def _evals_and_episodes(client: MlflowClient, eval_runs: pd.DataFrame,
+                        tmp: Path) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, str]]:
+    eval_rows, episode_frames, configs = [], [], {}
+    for run in eval_runs.to_dict("records"):
+        row = {k: run.get(k) for k in ("run_id", "model", "scenario", "seed", "train_key", "git_commit")}
+        for metric in EVAL_METRICS:
+            value = run.get(f"metrics.eval/{metric}")
+            row[metric] = np.nan if value is None or pd.isna(value) else float(value)
+        run_id = str(run["run_id"])
+        artifacts = _artifact_names(client, run_id)
+        row["n_episodes"] = np.nan
+        if "episodes.csv" in artifacts:
+            text = _download_text(client, run_id, "episodes.csv", tmp / run_id)
+            if text:
+                episodes = pd.read_csv(io.StringIO(text))
+                episodes.columns = [c.removeprefix("eval/") for c in episodes.columns]
+                row["n_episodes"] = len(episodes)
+                # A run that logged the table but not a mean still gets its mean from the table.
+                for metric in EVAL_METRICS:
+                    if np.isnan(row[metric]) and metric in episodes:
+                        row[metric] = float(episodes[metric].mean())
+                if "episode" not in episodes:  # the app writes the index as an `episode` column
+                    episodes.insert(0, "episode", range(len(episodes)))
+                episodes = episodes.drop(columns=[c for c in ("seed", "scenario", "model", "run_id")
+                                                  if c in episodes])
+                for key in ("seed", "scenario", "model", "run_id"):
+                    episodes.insert(0, key, row[key])
+                episode_frames.append(episodes)
+        if str(run["model"]) not in configs and "config.yaml" in artifacts:
+            text = _download_text(client, run_id, "config.yaml", tmp / run_id)
+            if text:
+                configs[str(run["model"])] = text
+        eval_rows.append(row)
+    evals = pd.DataFrame(eval_rows, columns=["run_id", "model", "scenario", "seed", "train_key", "git_commit",
+                                             *EVAL_METRICS, "n_episodes"])
+    episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame(
+        columns=["run_id", "model", "scenario", "seed", "episode"])
+    return evals, episodes, configs
+
+
+def load_store(tracking_uri: str | None = None, experiment: str = "hgm_repro") -> StoreData:
+    """Read one experiment of a tracking store. Raises `EmptyStoreError` when there is nothing to analyse."""
+    # One progress bar per downloaded artifact would bury the command's output.
+    os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")
+    uri = tracking_uri or default_tracking_uri()
+    if uri.startswith("sqlite:///"):
+        # MLflow would silently create an empty database here; a missing file is a user error.
+        db = Path(uri.removeprefix("sqlite:///"))
+        if not db.exists():
+            raise EmptyStoreError(f"no tracking store at {db} (give --tracking-uri, or run from the directory "
+                                  "holding mlflow.db)")
+    client = MlflowClient(tracking_uri=uri)
+    exp = client.get_experiment_by_name(experiment)
+    if exp is None:
+        raise EmptyStoreError(f"no experiment named {experiment!r} in the tracking store {uri}")
+    runs = _runs_frame(client, exp.experiment_id)
+    if runs.empty:
+        raise EmptyStoreError(f"experiment {experiment!r} in {uri} has no runs tagged with a stage "
+                              "(train/eval): run `python -m hgm_repro` first")
+    # Failed and killed runs hold partial results that would bias the means.
+    bad = runs["status"].isin(["FAILED", "KILLED"])
+    dropped = [f"{int(bad.sum())} FAILED/KILLED run(s) left out"] if bad.any() else []
+    runs = runs[~bad]
+    train, notes_t = _keep_latest(runs[runs["stage"] == "train"], ["model", "seed"], "train")
+    evals_runs, notes_e = _keep_latest(runs[runs["stage"] == "eval"], ["model", "scenario", "seed"], "eval")
+    dropped += notes_t + notes_e
+    with tempfile.TemporaryDirectory(prefix="hgm_analysis_") as tmp:
+        evals, episodes, configs = _evals_and_episodes(client, evals_runs, Path(tmp))
+    curves = _curves(client, train)
+    kept = pd.concat([train, evals_runs], ignore_index=True)
+    return StoreData(tracking_uri=uri, experiment=experiment, runs=kept, curves=curves, evals=evals,
+                     episodes=episodes, configs=configs, dropped=dropped)

@@ -1,0 +1,199 @@
+"""From a loaded store to the files in reports/: figures, CSV tables, claims and report.pdf."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from analysis import tables
+from analysis.claims import claims_table, evaluate_claims
+from analysis.curves import area_values, final_values, fluctuation_values
+from analysis.discussion import discussion
+from analysis.figures import TRAINING_FIGURES, make_figures
+from analysis.labels import LEARNED, REFERENCE_HOSTS, SCENARIOS, model_label, ordered_models
+from analysis.load import EVAL_METRICS, StoreData
+from analysis.pictures import pictures_figure, scenario_pictures
+from analysis.report import ReportInputs, fmt_estimate, write_report
+from analysis.stats import mean_ci
+
+
+@dataclass
+class Outputs:
+    report: Path
+    figures: dict[str, dict[str, Path]]
+    csvs: list[Path]
+
+
+def _flatten(node: Any, prefix: str = "") -> dict[str, Any]:
+    if isinstance(node, dict):
+        out: dict[str, Any] = {}
+        for k, v in node.items():
+            out.update(_flatten(v, f"{prefix}{k}."))
+        return out
+    return {prefix[:-1]: node}
+
+
+def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFrame | None, str]:
+    """Simulator parameters from the runs' logged params, else from conf/simulator/highway.yaml."""
+    cols = [c for c in runs.columns if c.startswith("params.simulator.")]
+    flat: dict[str, Any] = {}
+    source = ""
+    if cols:
+        first = runs[cols].dropna(how="all")
+        if not first.empty:
+            row = first.iloc[0]
+            flat = {c.removeprefix("params.simulator."): row[c] for c in cols if pd.notna(row[c])}
+            source = "from the logged params of the runs"
+    if not flat:
+        try:
+            from hgm_repro import CONF_DIR
+
+            flat = _flatten(yaml.safe_load((Path(CONF_DIR) / "simulator" / "highway.yaml").read_text()))
+            source = "from conf/simulator/highway.yaml: the runs did not log them"
+        except Exception as exc:  # noqa: BLE001 - the report still builds without this table
+            return [], None, f"not available ({type(exc).__name__})"
+    vt_rows: dict[str, dict[str, Any]] = {}
+    scalars = []
+    for key, value in sorted(flat.items()):
+        parts = key.split(".")
+        if parts[0] == "vehicle_types" and len(parts) == 3:
+            vt_rows.setdefault(parts[1], {})[parts[2]] = value
+        else:
+            scalars.append((key, str(value)))
+    vtypes = pd.DataFrame.from_dict(vt_rows, orient="index") if vt_rows else None
+    return scalars, vtypes, source
+
+
+def _config_texts(configs: dict[str, str]) -> dict[str, str]:
+    """The first model's config in full; for the others only the keys that differ from it."""
+    if not configs:
+        return {}
+    order = ordered_models(configs)
+    base_model = order[0]
+    out = {base_model: configs[base_model]}
+    try:
+        base = _flatten(yaml.safe_load(configs[base_model]) or {})
+    except yaml.YAMLError:
+        return {m: configs[m] for m in order}
+    for model in order[1:]:
+        try:
+            other = _flatten(yaml.safe_load(configs[model]) or {})
+        except yaml.YAMLError:
+            out[model] = configs[model]
+            continue
+        diff = [f"{k}: {other.get(k, '<absent>')}    (vs {base.get(k, '<absent>')})"
+                for k in sorted(set(base) | set(other)) if base.get(k) != other.get(k)]
+        out[model] = (f"Keys that differ from {base_model}'s config:\n" + "\n".join(diff)) if diff else \
+            f"Same as {base_model}'s config."
+    return out
+
+
+def _training_numbers(curves: pd.DataFrame) -> dict[str, pd.DataFrame]:
+    """For each training figure: per method, seeds, final level and area, each mean [CI] over seeds."""
+    out = {}
+    for name, (metric, _, _) in TRAINING_FIGURES.items():
+        measures = {"Final (last 10 % of steps)": final_values(curves, metric),
+                    "Area (mean over common steps)": area_values(curves, metric)}
+        if metric == "overtakes":
+            measures["Fluctuation (std of bin-to-bin change)"] = fluctuation_values(curves, metric)
+        rows = []
+        for model in ordered_models(curves.loc[curves["metric"] == metric, "model"]):
+            row = {"Method": model_label(model, short=True)}
+            for label, values in measures.items():
+                v = values.loc[values["model"] == model, "value"].to_numpy(dtype=float)
+                e = mean_ci(v[np.isfinite(v)])
+                row["Seeds"] = str(e.n)
+                row[label] = fmt_estimate(e.point, e.low, e.high, e.n, metric, digits=3 if "Fluct" in label else 2)
+            rows.append(row)
+        if rows:
+            frame = pd.DataFrame(rows)
+            out[name] = frame[["Method", "Seeds", *measures]]
+    return out
+
+
+def _aggregate_text(evals: pd.DataFrame, scenarios: list[str]) -> pd.DataFrame:
+    agg = tables.aggregate(evals, "episode_return", scenarios)
+    if agg.empty:
+        return agg
+    m = "episode_return"
+    return pd.DataFrame({
+        "Method": [model_label(x, short=True) for x in agg["model"]],
+        "Scenarios": agg["scenarios"].astype(str),
+        "Mean [CI]": [fmt_estimate(r.mean, r.mean_low, r.mean_high, r.min_seeds, m) for r in agg.itertuples()],
+        "IQM [CI]": [fmt_estimate(r.iqm, r.iqm_low, r.iqm_high, r.min_seeds, m) for r in agg.itertuples()],
+        "P(Proposed > X) [CI]": [fmt_estimate(r.p_improve, r.p_low, r.p_high, r.min_seeds, digits=2)
+                                 if np.isfinite(r.p_improve) else "-" for r in agg.itertuples()],
+    })
+
+
+def _coverage_notes(data: StoreData) -> list[str]:
+    notes = list(data.dropped)
+    models = set(data.evals["model"])
+    for host in REFERENCE_HOSTS:
+        if host not in models:
+            notes.append(f"No evaluation runs of the {model_label(host)}: its reference line and the "
+                         "comparisons with it are missing.")
+    for model in LEARNED:
+        if model not in models:
+            notes.append(f"No evaluation runs of {model_label(model)}.")
+    trained = set(data.curves["model"]) if not data.curves.empty else set()
+    for model in LEARNED:
+        if model in models and model not in trained:
+            notes.append(f"{model_label(model)} has evaluation runs but no training curves in the store.")
+    if len(data.git_commits) > 1:
+        notes.append(f"The runs come from {len(data.git_commits)} different git commits.")
+    keys = data.runs.loc[data.runs["stage"] == "train", "train_key"].dropna().unique()
+    if len(keys) > len(set(data.runs.loc[data.runs["stage"] == "train", "model"])):
+        notes.append("Some method has training runs with more than one train_key (different training configs); "
+                     "the latest run per method and seed is used.")
+    return notes
+
+
+def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outputs:
+    """Everything `python -m analysis` writes, from one loaded store."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    evals = data.evals
+    figures = make_figures(data.curves, evals, out_dir)
+    pictures_note = None
+    if pictures:
+        pics, pictures_note = scenario_pictures(list(SCENARIOS))
+        if pics:
+            figures["scenes"] = pictures_figure(pics, out_dir / "fig_scenes")
+    else:
+        pictures_note = "Pictures switched off (--no-pictures)."
+
+    present = set(evals["scenario"])
+    scenarios = [s for s in SCENARIOS if s in present] or sorted(present)
+    summary = tables.summary(evals)
+    grids = {m: tables.wide(summary, m, scenarios) for m in EVAL_METRICS if m in set(summary["metric"])}
+    results = evaluate_claims(evals, data.curves)
+    counts = tables.seed_counts(evals, list(SCENARIOS) + sorted(present - set(SCENARIOS))) \
+        if not evals.empty else pd.DataFrame()
+    train_runs = data.runs[data.runs["stage"] == "train"]
+    train_seeds = {m: int(train_runs.loc[train_runs["model"] == m, "seed"].nunique())
+                   for m in ordered_models(train_runs["model"])}
+    scalars, vtypes, env_source = _environment(data.runs)
+
+    csvs = tables.write_csvs(summary, out_dir)
+    claims_csv = out_dir / "claims.csv"
+    claims_table(results).to_csv(claims_csv, index=False)
+    csvs.append(claims_csv)
+
+    inputs = ReportInputs(
+        tracking_uri=data.tracking_uri, experiment=data.experiment, git_commits=data.git_commits,
+        seed_counts=counts, train_seeds=train_seeds, notes=_coverage_notes(data),
+        figures={k: v["png"] for k, v in figures.items()}, training_numbers=_training_numbers(data.curves),
+        env_scalars=scalars, vehicle_types=vtypes, env_source=env_source, pictures_note=pictures_note,
+        test_grids=grids, paper_table=tables.paper_table6(), aggregate=_aggregate_text(evals, scenarios),
+        claims=results, discussion=discussion(results, counts, len(train_runs), evals),
+        configs=_config_texts(data.configs),
+        git_dirty=data.git_dirty,
+        train_keys=sorted(str(k) for k in data.runs["train_key"].dropna().unique()),
+    )
+    report = write_report(inputs, out_dir / "report.pdf")
+    return Outputs(report=report, figures=figures, csvs=csvs)

@@ -1,0 +1,370 @@
+"""Typeset the PDF report with fpdf2. Everything it prints is computed elsewhere and passed in."""
+
+from __future__ import annotations
+
+import datetime as dt
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import matplotlib
+import pandas as pd
+from fpdf import FPDF
+from fpdf.fonts import FontFace
+from PIL import Image
+
+from analysis.claims import NOT_SUPPORTED, SUPPORTED, ClaimResult
+from analysis.labels import CV_RATIO, METRIC_LABELS, fmt, model_label
+
+# matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
+# latin-1 core fonts.
+_FONT_DIR = Path(matplotlib.get_data_path()) / "fonts" / "ttf"
+SECTION_TITLES = ("Data used", "Environment and scenarios", "Average speed", "Lane changes", "Overtakes",
+                  "Test results", "The paper's claims", "Discussion", "Appendix: configuration and commits")
+VERDICT_COLOURS = {SUPPORTED: (46, 147, 60), NOT_SUPPORTED: (209, 73, 91)}
+
+
+@dataclass
+class ReportInputs:
+    """What the report shows; built by `analysis.pipeline`."""
+
+    tracking_uri: str
+    experiment: str
+    git_commits: list[str]
+    seed_counts: pd.DataFrame  # model x scenario
+    train_seeds: dict[str, int]
+    notes: list[str]  # data coverage notes (dropped runs, missing baselines)
+    figures: dict[str, Path]  # name -> PNG
+    training_numbers: dict[str, pd.DataFrame]  # figure name -> table rows (strings)
+    env_scalars: list[tuple[str, str]]
+    vehicle_types: pd.DataFrame | None
+    env_source: str
+    pictures_note: str | None
+    test_grids: dict[str, pd.DataFrame]  # metric -> model x scenario cell strings
+    paper_table: pd.DataFrame
+    aggregate: pd.DataFrame  # already formatted strings
+    claims: list[ClaimResult]
+    discussion: list[str]
+    configs: dict[str, str]  # model -> resolved config text (or a diff against the first)
+    train_keys: list[str] = field(default_factory=list)
+    git_dirty: str = ""  # "true"/"false"/"mixed" from the runs' git_dirty tags
+
+
+class _Pdf(FPDF):
+    def footer(self) -> None:
+        self.set_y(-12)
+        self.set_font("DejaVu", size=8)
+        self.set_text_color(120)
+        self.cell(0, 6, f"hgm_repro reproduction report  -  page {self.page_no()}", align="C")
+        self.set_text_color(0)
+
+
+class ReportWriter:
+    """Small layout helpers over fpdf2 so the section code reads top to bottom."""
+
+    def __init__(self) -> None:
+        self.pdf = _Pdf(format="A4")
+        self.pdf.set_margins(16, 16, 16)
+        self.pdf.set_auto_page_break(True, margin=18)
+        self.pdf.add_font("DejaVu", "", str(_FONT_DIR / "DejaVuSans.ttf"))
+        self.pdf.add_font("DejaVu", "B", str(_FONT_DIR / "DejaVuSans-Bold.ttf"))
+        self.pdf.add_font("DejaVu", "I", str(_FONT_DIR / "DejaVuSans-Oblique.ttf"))
+        self.pdf.add_font("DejaVuMono", "", str(_FONT_DIR / "DejaVuSansMono.ttf"))
+        self.pdf.set_font("DejaVu", size=10)
+        self.section_no = 0
+
+    @property
+    def width(self) -> float:
+        return self.pdf.w - self.pdf.l_margin - self.pdf.r_margin
+
+    def section(self, title: str, new_page: bool = True) -> None:
+        # The table of contents placeholder already breaks the page: no blank page after it.
+        if new_page and self.pdf.get_y() > self.pdf.t_margin + 1:
+            self.pdf.add_page()
+        self.section_no += 1
+        self.pdf.start_section(f"{self.section_no}. {title}")
+        self.pdf.set_font("DejaVu", "B", 15)
+        self.pdf.cell(0, 10, f"{self.section_no}. {title}", new_x="LMARGIN", new_y="NEXT")
+        self.pdf.set_font("DejaVu", size=10)
+
+    def heading(self, text: str, keep_mm: float = 30) -> None:
+        self.space(2)
+        self.keep(keep_mm)
+        self.pdf.set_font("DejaVu", "B", 11)
+        self.pdf.multi_cell(0, 6, text, align="L", new_x="LMARGIN", new_y="NEXT")
+        self.pdf.set_font("DejaVu", size=10)
+
+    def para(self, text: str, size: float = 10, italic: bool = False) -> None:
+        self.pdf.set_font("DejaVu", "I" if italic else "", size)
+        self.pdf.multi_cell(0, size * 0.5, text, new_x="LMARGIN", new_y="NEXT")
+        self.pdf.set_font("DejaVu", size=10)
+        self.space(1.5)
+
+    def bullets(self, items: Sequence[str], size: float = 9.5) -> None:
+        self.pdf.set_font("DejaVu", size=size)
+        for item in items:
+            self.pdf.set_x(self.pdf.l_margin + 3)
+            self.pdf.multi_cell(self.width - 3, size * 0.5, f"- {item}", align="L", new_x="LMARGIN",
+                                new_y="NEXT")
+        self.pdf.set_font("DejaVu", size=10)
+        self.space(1.5)
+
+    def space(self, mm: float) -> None:
+        self.pdf.ln(mm)
+
+    def keep(self, mm: float) -> None:
+        """Start a new page unless `mm` of height is left (keeps headings with what follows)."""
+        if self.pdf.get_y() + mm > self.pdf.h - self.pdf.b_margin:
+            self.pdf.add_page()
+
+    def image(self, path: Path, width: float | None = None, caption: str | None = None) -> None:
+        w = min(width or self.width, self.width)
+        with Image.open(path) as im:
+            h = w * im.height / im.width
+        self.keep(h + 10)
+        x = self.pdf.l_margin + (self.width - w) / 2
+        self.pdf.image(str(path), x=x, w=w)
+        if caption:
+            self.para(caption, size=8.5, italic=True)
+
+    def table(self, rows: list[list[str]], col_widths: Sequence[float] | None = None, size: float = 8,
+              align: str = "CENTER", first_col_left: bool = True, mono: bool = False,
+              headings: bool = True) -> None:
+        """A table whose first row is the heading; cells may hold two lines separated by a newline."""
+        self.pdf.set_font("DejaVuMono" if mono else "DejaVu", size=size)
+        # Room for the heading row and a first row; a heading() before the table asks for more.
+        self.keep(20)
+        aligns = ["LEFT" if (first_col_left and i == 0) else align for i in range(len(rows[0]))]
+        with self.pdf.table(col_widths=col_widths, text_align=aligns, line_height=size * 0.48,
+                            headings_style=FontFace(emphasis="BOLD", fill_color=(230, 234, 240)),
+                            padding=(0.8, 1.2), width=self.width, first_row_as_headings=headings) as table:
+            for row in rows:
+                r = table.row()
+                for cell in row:
+                    r.cell(str(cell))
+        self.pdf.set_font("DejaVu", size=10)
+        self.space(3)
+
+    def frame_table(self, frame: pd.DataFrame, index_name: str, size: float = 8,
+                    first_width: float = 2.0) -> None:
+        rows = [[index_name, *[str(c) for c in frame.columns]]]
+        rows += [[str(i), *[str(v) for v in r]] for i, r in zip(frame.index, frame.to_numpy(), strict=True)]
+        self.table(rows, col_widths=[first_width] + [1.0] * len(frame.columns), size=size)
+
+    def verdict(self, result: ClaimResult) -> None:
+        self.keep(30)
+        colour = VERDICT_COLOURS.get(result.verdict, (200, 140, 20))
+        self.pdf.set_font("DejaVu", "B", 10.5)
+        self.pdf.multi_cell(0, 5.5, f"Claim {result.number}. {result.statement}", align="L",
+                            new_x="LMARGIN", new_y="NEXT")
+        self.pdf.set_text_color(*colour)
+        self.pdf.cell(0, 6, f"Verdict: {result.verdict.upper()}", new_x="LMARGIN", new_y="NEXT")
+        self.pdf.set_text_color(0)
+        self.para(f"Rule: {result.rule}", size=8.5, italic=True)
+        self.bullets([c.text() for c in result.comparisons] + result.notes, size=8.5)
+
+    def save(self, path: Path) -> Path:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        self.pdf.output(str(path))
+        return path
+
+
+def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
+    pdf = w.pdf
+    pdf.add_page()
+    pdf.ln(35)
+    pdf.set_font("DejaVu", "B", 20)
+    pdf.multi_cell(0, 10, "Reproduction report", align="C", new_x="LMARGIN", new_y="NEXT")
+    pdf.set_font("DejaVu", "", 13)
+    pdf.multi_cell(0, 7, "Deep RL driving decisions in heterogeneous highway traffic with a Hyper-Grid "
+                         "Matrix (Bai et al.): our runs against the paper's claims", align="C",
+                   new_x="LMARGIN", new_y="NEXT")
+    pdf.ln(12)
+    verdicts = {r.number: r.verdict for r in inp.claims}
+    info = [
+        ["Generated", dt.datetime.now().strftime("%Y-%m-%d %H:%M")],
+        ["Tracking store", inp.tracking_uri],
+        ["Experiment", inp.experiment],
+        ["Git commit(s) of the runs", "\n".join(inp.git_commits) or "not recorded"],
+        ["Uncommitted changes (git_dirty)", inp.git_dirty or "not recorded"],
+        ["Training configurations (train_key)", "\n".join(inp.train_keys) or "none"],
+        ["Claims supported", ", ".join(str(k) for k, v in verdicts.items() if v == SUPPORTED) or "none"],
+        ["Claims not supported", ", ".join(str(k) for k, v in verdicts.items() if v == NOT_SUPPORTED) or "none"],
+    ]
+    w.table(info, col_widths=[1.0, 2.2], size=9, align="LEFT", headings=False)
+    w.para("Every interval in this report is a 95 % percentile bootstrap over seeds (runs), stratified by "
+           "scenario; episodes inside one run are never treated as independent replications.", size=9,
+           italic=True)
+    pdf.add_page()
+    pdf.insert_toc_placeholder(_toc, pages=1)
+
+
+def _toc(pdf: FPDF, outline: list) -> None:
+    pdf.set_x(pdf.l_margin)
+    pdf.set_font("DejaVu", "B", 15)
+    pdf.cell(0, 10, "Contents", new_x="LMARGIN", new_y="NEXT")
+    pdf.set_font("DejaVu", size=11)
+    for entry in outline:
+        pdf.cell(0, 7, f"{entry.name}", new_x="END", new_y="LAST", link=pdf.add_link(page=entry.page_number))
+        pdf.set_x(pdf.w - pdf.r_margin - 15)
+        pdf.cell(15, 7, str(entry.page_number), align="R", new_x="LMARGIN", new_y="NEXT")
+
+
+def _data_section(w: ReportWriter, inp: ReportInputs) -> None:
+    w.section(SECTION_TITLES[0])
+    w.para("Seeds per method and test scenario in the store (0 = no run). Each cell is one evaluation "
+           "run per seed; learned methods are evaluated from the checkpoint trained with that seed.")
+    if inp.seed_counts.empty:
+        w.para("The store holds no evaluation runs.")
+    else:
+        frame = inp.seed_counts.copy()
+        frame.index = [model_label(m) for m in frame.index]
+        frame.columns = [f"Sc. {c}" if c in CV_RATIO else str(c) for c in frame.columns]
+        w.frame_table(frame, "Method", size=8.5, first_width=2.6)
+    if inp.train_seeds:
+        w.para("Training runs (seeds) per method: " + ", ".join(f"{model_label(m, True)} {n}"
+                                                                for m, n in inp.train_seeds.items()) + ".")
+    else:
+        w.para("No training runs in the store: the training figures are left out.")
+    if inp.notes:
+        w.heading("Coverage notes")
+        w.bullets(inp.notes)
+
+
+def _environment_section(w: ReportWriter, inp: ReportInputs) -> None:
+    w.section(SECTION_TITLES[1])
+    w.para(f"Simulator parameters ({inp.env_source}).", size=9)
+    half = (len(inp.env_scalars) + 1) // 2
+    left, right = inp.env_scalars[:half], inp.env_scalars[half:]
+    rows = [["Parameter", "Value", "Parameter", "Value"]]
+    for i in range(half):
+        r = right[i] if i < len(right) else ("", "")
+        rows.append([left[i][0], left[i][1], r[0], r[1]])
+    if inp.env_scalars:
+        w.table(rows, col_widths=[2.2, 1.0, 2.2, 1.0], size=7.5)
+    if inp.vehicle_types is not None and not inp.vehicle_types.empty:
+        w.heading("Vehicle types (paper Table 1 plus the sizes and gaps it leaves open)")
+        w.frame_table(inp.vehicle_types, "Type", size=7.5, first_width=0.8)
+    w.heading("Test scenarios (paper Table 5)")
+    rows = [["Scenario", *CV_RATIO.keys()], ["CV ratio", *[f"{v:.2f}" for v in CV_RATIO.values()]],
+            ["AHV ratio", *[f"{(1 - v) / 2:.3f}" for v in CV_RATIO.values()]],
+            ["CHV ratio", *[f"{(1 - v) / 2:.3f}" for v in CV_RATIO.values()]]]
+    w.table(rows, size=8.5)
+    w.heading("What the host sees in each scenario")
+    if "scenes" in inp.figures:
+        w.image(inp.figures["scenes"], caption="Top: the host's front camera. Bottom: the Hyper-Grid Matrix "
+                "(red = faster than the mid speed (v_max+v_min)/2, blue = slower, white = mid speed or empty "
+                "cell). Only connected vehicles appear in the HGM, so it fills up as the CV ratio grows.")
+    else:
+        w.para(inp.pictures_note or "Pictures not available.", size=9, italic=True)
+
+
+def _training_section(w: ReportWriter, inp: ReportInputs, index: int, name: str, what: str) -> None:
+    w.section(SECTION_TITLES[index])
+    if name not in inp.figures:
+        w.para(f"No training curves of {what} in the store.")
+        return
+    w.image(inp.figures[name], caption=f"{what.capitalize()} against environment steps: line = mean over "
+            "seeds of each method's binned curve, band = 95 % bootstrap CI over seeds (no band with one seed). "
+            "Dashed: evaluation means of the non-learning hosts, for reference.")
+    numbers = inp.training_numbers.get(name)
+    if numbers is not None and not numbers.empty:
+        w.heading("Per-seed summaries (mean over seeds, 95 % CI)")
+        rows = [list(numbers.columns)] + numbers.astype(str).to_numpy().tolist()
+        w.table(rows, col_widths=[1.6] + [1.0] * (len(numbers.columns) - 1), size=8)
+
+
+def _test_section(w: ReportWriter, inp: ReportInputs) -> None:
+    w.section(SECTION_TITLES[5])
+    w.heading("Table 6 (ours): mean test episode return per method and scenario")
+    w.para("Mean over seeds with its 95 % CI below it. Our score is the mean episode return "
+           "(Algorithm 2's reward summed over an episode); the paper does not say what its score is.", size=9)
+    grid = inp.test_grids.get("episode_return")
+    if grid is None or grid.empty:
+        w.para("No evaluation runs with an episode return in the store.")
+    else:
+        _grid_table(w, grid)
+    w.heading("Table 6 as printed in the paper (score, units not stated)")
+    w.frame_table(inp.paper_table.astype(str), "Method (paper)", size=8.5, first_width=1.6)
+    if not inp.aggregate.empty:
+        w.heading("Across scenarios: mean, IQM and probability of improvement of the episode return")
+        w.para("Mean = mean over scenarios of the per-scenario mean over seeds; IQM = interquartile mean of "
+               "all (scenario, seed) scores; P(Proposed > X) = chance that a random seed of Proposed beats a "
+               "random seed of X in the same scenario, averaged over scenarios (Agarwal et al. 2021). All CIs "
+               "by stratified bootstrap over seeds.", size=8.5)
+        rows = [list(inp.aggregate.columns)] + inp.aggregate.astype(str).to_numpy().tolist()
+        w.table(rows, col_widths=[1.7, 0.8, 1.4, 1.4, 1.4], size=8)
+    if "fig_test_results" in inp.figures:
+        w.image(inp.figures["fig_test_results"], caption="Every test metric per scenario: mean over seeds and "
+                "95 % bootstrap CI; scenario k has CV ratio (k-1)/4.")
+    for metric, grid in inp.test_grids.items():
+        if metric == "episode_return" or grid.empty:
+            continue
+        # Keep the heading on the page of its table.
+        w.heading(f"{METRIC_LABELS.get(metric, metric)}: mean and 95 % CI over seeds",
+                  keep_mm=_grid_table_height(grid))
+        _grid_table(w, grid)
+
+
+def _grid_table_height(grid: pd.DataFrame) -> float:
+    # Heading text, the table's heading row, then two-line cells of about 9.5 mm each.
+    return 16.0 + 9.5 * len(grid)
+
+
+def _grid_table(w: ReportWriter, grid: pd.DataFrame) -> None:
+    frame = grid.copy()
+    frame.index = [model_label(m, short=True) for m in frame.index]
+    frame.columns = [f"Scenario {c}" if c in CV_RATIO else str(c) for c in frame.columns]
+    w.frame_table(frame, "Method", size=8, first_width=1.3)
+
+
+def _claims_section(w: ReportWriter, inp: ReportInputs) -> None:
+    w.section(SECTION_TITLES[6])
+    w.para("Each claim is split into signed differences (positive = what the paper says). A difference "
+           "supports the claim when its 95 % CI lies above 0, contradicts it when the CI lies below 0, and "
+           "is undecided otherwise or with fewer than 3 seeds. A claim needs all its differences to hold; "
+           "one contradiction makes it not supported.", size=9)
+    rows = [["Claim", "Statement", "Verdict"]] + [[str(r.number), r.statement, r.verdict] for r in inp.claims]
+    w.table(rows, col_widths=[0.5, 5.0, 1.2], size=8.5, align="LEFT")
+    for result in inp.claims:
+        w.verdict(result)
+
+
+def _appendix(w: ReportWriter, inp: ReportInputs) -> None:
+    w.section(SECTION_TITLES[8])
+    w.para("Git commit(s) recorded on the runs used: " + (", ".join(inp.git_commits) or "none recorded") + ".")
+    if not inp.configs:
+        w.para("No resolved config.yaml artifact was found on the evaluation runs.")
+    for model, text in inp.configs.items():
+        w.heading(f"Resolved configuration: {model_label(model)}")
+        w.pdf.set_font("DejaVuMono", size=6.5)
+        w.pdf.multi_cell(0, 3.0, text, align="L", new_x="LMARGIN", new_y="NEXT")
+        w.pdf.set_font("DejaVu", size=10)
+        w.space(2)
+
+
+def write_report(inp: ReportInputs, path: Path) -> Path:
+    """Write the whole report to `path`."""
+    w = ReportWriter()
+    _title_page(w, inp)
+    _data_section(w, inp)
+    _environment_section(w, inp)
+    _training_section(w, inp, 2, "fig5_speed", "average speed")
+    _training_section(w, inp, 3, "fig6_lane_changes", "lane changes per episode")
+    _training_section(w, inp, 4, "fig7_overtakes", "overtakes per episode")
+    _test_section(w, inp)
+    _claims_section(w, inp)
+    w.section(SECTION_TITLES[7])
+    for para in inp.discussion:
+        w.para(para)
+    _appendix(w, inp)
+    return w.save(path)
+
+
+def fmt_estimate(point: float, low: float, high: float, n: int, metric: str = "", digits: int | None = None) -> str:
+    """'mean [low, high]', or 'mean (1 seed, no CI)', or 'n/a'."""
+    if n == 0:
+        return "n/a"
+    if n < 2:
+        return f"{fmt(point, metric, digits)} (1 seed, no CI)"
+    return f"{fmt(point, metric, digits)} [{fmt(low, metric, digits)}, {fmt(high, metric, digits)}]"

@@ -1,0 +1,107 @@
+"""Test-result tables (the paper's Table 6 and every metric beside it) with CIs over seeds."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from analysis.labels import fmt, model_label, ordered_models, ordered_scenarios
+from analysis.load import EVAL_METRICS
+from analysis.stats import Estimate, iqm_ci, mean_ci, probability_of_improvement, stratified_mean_ci
+
+# The paper's Table 6 (test score per scenario; the paper does not name the unit).
+PAPER_TABLE6 = pd.DataFrame(
+    {"1": [1927, 1911, 1868], "2": [1937, 1893, 1893], "3": [1950, 1901, 1867],
+     "4": [1974, 1907, 1875], "5": [1969, 1903, 1907]},
+    index=pd.Index(["proposed", "min", "coordinate"], name="model"),
+)
+
+
+def per_scenario(evals: pd.DataFrame, model: str, metric: str,
+                 scenarios: list[str] | None = None) -> dict[str, np.ndarray]:
+    """Per-seed values of one metric for one model, keyed by scenario (the bootstrap strata)."""
+    rows = evals[(evals["model"] == model) & evals[metric].notna()] if metric in evals else evals.iloc[:0]
+    out = {}
+    for scenario, group in rows.groupby("scenario"):
+        if scenarios is None or str(scenario) in scenarios:
+            out[str(scenario)] = group[metric].to_numpy(dtype=float)
+    return out
+
+
+def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.DataFrame:
+    """Long table: model, scenario, metric, n_seeds, mean, low, high (95 % bootstrap CI over seeds)."""
+    rows = []
+    for (model, scenario), group in evals.groupby(["model", "scenario"]):
+        for metric in metrics:
+            if metric not in group:
+                continue
+            est = mean_ci(group[metric].to_numpy(dtype=float))
+            rows.append({"model": model, "scenario": str(scenario), "metric": metric, "n_seeds": est.n,
+                         "mean": est.point, "low": est.low, "high": est.high})
+    return pd.DataFrame(rows, columns=["model", "scenario", "metric", "n_seeds", "mean", "low", "high"])
+
+
+def cell_text(mean: float, low: float, high: float, n: int, metric: str) -> str:
+    """Mean on the first line, the CI (or why there is none) on the second."""
+    if n == 0 or np.isnan(mean):
+        return "-"
+    if n < 2 or np.isnan(low):
+        return f"{fmt(mean, metric)}\n(1 seed, no CI)"
+    return f"{fmt(mean, metric)}\n[{fmt(low, metric)}, {fmt(high, metric)}]"
+
+
+def wide(summary_table: pd.DataFrame, metric: str, scenarios: list[str] | None = None) -> pd.DataFrame:
+    """Method x scenario grid of formatted cells for one metric; '-' where the store has no run."""
+    part = summary_table[summary_table["metric"] == metric]
+    models = ordered_models(part["model"])
+    cols = scenarios or ordered_scenarios(part["scenario"])
+    grid = pd.DataFrame("-", index=pd.Index(models, name="model"), columns=cols)
+    for row in part.itertuples(index=False):
+        if row.scenario in cols:
+            grid.loc[row.model, row.scenario] = cell_text(row.mean, row.low, row.high, row.n_seeds, metric)
+    return grid
+
+
+def seed_counts(evals: pd.DataFrame, scenarios: list[str] | None = None) -> pd.DataFrame:
+    """How many seeds each method x scenario cell holds (0 = missing)."""
+    cols = scenarios or ordered_scenarios(evals["scenario"])
+    counts = evals.groupby(["model", "scenario"])["seed"].nunique().unstack(fill_value=0)
+    counts = counts.reindex(index=ordered_models(evals["model"]), columns=cols, fill_value=0)
+    return counts.astype(int)
+
+
+def aggregate(evals: pd.DataFrame, metric: str, scenarios: list[str],
+              baseline: str = "proposed") -> pd.DataFrame:
+    """Across-scenario summaries per method: mean, IQM, and P(baseline > method), all with CIs."""
+    rows = []
+    base = per_scenario(evals, baseline, metric, scenarios)
+    for model in ordered_models(evals["model"]):
+        scores = per_scenario(evals, model, metric, scenarios)
+        if not scores:
+            continue
+        mean = stratified_mean_ci(scores)
+        iq = iqm_ci(scores)
+        poi = (probability_of_improvement(base, scores) if model != baseline and base
+               else Estimate(np.nan, np.nan, np.nan, 0))
+        rows.append({"model": model, "scenarios": len(scores), "min_seeds": mean.n,
+                     "mean": mean.point, "mean_low": mean.low, "mean_high": mean.high,
+                     "iqm": iq.point, "iqm_low": iq.low, "iqm_high": iq.high,
+                     "p_improve": poi.point, "p_low": poi.low, "p_high": poi.high})
+    return pd.DataFrame(rows)
+
+
+def paper_table6() -> pd.DataFrame:
+    table = PAPER_TABLE6.copy()
+    table.index = [model_label(m, short=True) for m in table.index]
+    return table
+
+
+def write_csvs(summary_table: pd.DataFrame, out_dir: Path) -> list[Path]:
+    """Machine-readable copies of the numbers the report typesets."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    paths = [out_dir / "test_summary.csv", out_dir / "paper_table6.csv"]
+    summary_table.to_csv(paths[0], index=False)
+    PAPER_TABLE6.to_csv(paths[1])
+    return paths
