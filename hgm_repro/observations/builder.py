@@ -1,0 +1,78 @@
+"""Builds the observations a model's streams ask for, stacked over time, from the simulator state.
+
+Every stream is a pure function of `sim.state`; this class only picks the streams, encodes them
+to the dtypes of docs/interfaces.md and keeps one frame stack per stream.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from ..simulator import HighwaySimulator
+from .config import ObservationConfig
+from .coordinates import FEATURES, coordinates
+from .frame_stack import FrameStack
+from .front_camera import birdseye_camera, front_camera
+from .hyper_grid_matrix import hyper_grid_matrix
+
+
+class ObservationBuilder:
+    """`frame()` -> single frames; `reset(mask)` / `step()` -> stacked observations, keys `cfg.keys`."""
+
+    def __init__(self, sim: HighwaySimulator, obs_cfg: ObservationConfig):
+        self.sim = sim
+        self.cfg = obs_cfg
+        self.keys = obs_cfg.keys
+        self.stacks = {key: FrameStack(obs_cfg.frame_stack) for key in self.keys}
+
+    def specs(self) -> dict[str, tuple[tuple[int, ...], torch.dtype]]:
+        """key -> (shape without the batch dimension, dtype) of the stacked observations."""
+        c = self.cfg
+        f = c.frame_stack
+        out: dict[str, tuple[tuple[int, ...], torch.dtype]] = {}
+        if "camera" in self.keys:
+            out["camera"] = ((3 * f, c.height, c.width), torch.uint8)
+        if "hgm" in self.keys:
+            out["hgm"] = ((3 * f, c.height, c.width), torch.uint8)
+        if "coordinates" in self.keys:
+            out["coordinates"] = ((f * c.coord_k * FEATURES,), torch.float32)
+        return out
+
+    @torch.no_grad()
+    def frame(self) -> dict[str, torch.Tensor]:
+        """One frame of every stream for the current state: camera/hgm uint8 [N, 3, H, W],
+        coordinates float32 [N, K*6]."""
+        c, sim = self.cfg, self.sim
+        out: dict[str, torch.Tensor] = {}
+        if c.camera == "front":
+            out["camera"] = front_camera(sim, height=c.height, width=c.width, fov_deg=c.camera_fov_deg,
+                                         camera_height=c.camera_height, max_range=c.camera_max_range)
+        elif c.camera == "birdseye":
+            out["camera"] = birdseye_camera(sim, height=c.height, width=c.width, v2x_range=c.v2x_range)
+        if c.hgm != "none":
+            out["hgm"] = hyper_grid_matrix(sim, height=c.height, width=c.width, v2x_range=c.v2x_range,
+                                           variant=c.hgm, encoded=True)
+        if c.coordinates:
+            out["coordinates"] = coordinates(sim, k=c.coord_k, v2x_range=c.v2x_range)
+        return out
+
+    @torch.no_grad()
+    def reset(self, mask: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """Stacked observations after `sim.reset(mask)`: the stacks of envs in `mask` (all when
+        None) are refilled with the new first frame; other envs' stacks are left as they were."""
+        frames = self.frame()
+        return {k: self.stacks[k].reset(frames[k], mask) for k in self.keys}
+
+    @torch.no_grad()
+    def step(self, reset_mask: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
+        """Stacked observations after `sim.step`: the newest frame is pushed onto every stack.
+        With `reset_mask`, the envs in it (reset since the last call) are refilled instead, which
+        saves a second frame computation when resets and steps happen together."""
+        frames = self.frame()
+        out = {}
+        for k in self.keys:
+            stacked = self.stacks[k].push(frames[k])
+            if reset_mask is not None:
+                stacked = self.stacks[k].reset(frames[k], reset_mask, copy=False)
+            out[k] = stacked
+        return out

@@ -1,0 +1,140 @@
+"""What the observation builders make: which streams, at which size, with which camera.
+
+Built from two Hydra nodes: the root config's `observation` node (sizes, ranges, camera
+optics) and the model's `streams` node (which streams the network reads). Every value is
+checked here, so a bad one fails before the first frame with a message naming it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, fields
+from typing import Any
+
+CAMERAS = ("front", "birdseye", "none")
+HGM_VARIANTS = ("paper", "enriched", "none")
+
+# The smallest image the paper's conv stack (8x8/4, 4x4/2, 3x3/1, no padding) accepts:
+# 36 -> 8 -> 3 -> 1.
+MIN_IMAGE_SIDE = 36
+
+
+def conv_stack_output(side: int) -> int:
+    """Spatial size after the paper's conv stack (Table 3), to explain a too-small image."""
+    for kernel, stride in ((8, 4), (4, 2), (3, 1)):
+        side = (side - kernel) // stride + 1
+    return side
+
+
+def _plain(node: Any) -> dict[str, Any]:
+    if node is None:
+        return {}
+    try:
+        from omegaconf import DictConfig, OmegaConf
+
+        if isinstance(node, DictConfig):
+            return dict(OmegaConf.to_container(node, resolve=True))
+    except ImportError:  # pragma: no cover
+        pass
+    if not isinstance(node, Mapping):
+        raise ValueError(f"expected a mapping for the observation config, got {type(node).__name__}: {node!r}")
+    return dict(node)
+
+
+def _positive_int(name: str, value: Any) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise ValueError(f"observation.{name}={value!r} is not allowed: expected a whole number")
+    return value
+
+
+def _finite(name: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise ValueError(f"observation.{name}={value!r} is not allowed: expected a finite number")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class ObservationConfig:
+    """Which observation streams to build and how (see docs/interfaces.md)."""
+
+    camera: str = "front"  # front | birdseye | none
+    hgm: str = "paper"  # paper | enriched | none
+    coordinates: bool = False  # the Coordinate method's raw V2X vector
+    height: int = 84  # camera and HGM share height and width (one shared conv stack)
+    width: int = 84
+    frame_stack: int = 4
+    v2x_range: float = 40.0  # D_r, m (Algorithm 1)
+    coord_k: int = 16  # K nearest connected vehicles in the coordinate vector
+    camera_fov_deg: float = 90.0  # horizontal field of view
+    camera_height: float = 1.4  # m above the road
+    camera_max_range: float = 150.0  # m; vehicles farther ahead are not drawn
+
+    def __post_init__(self) -> None:
+        self.validate()
+
+    def validate(self) -> None:
+        if self.camera not in CAMERAS:
+            raise ValueError(f"observation camera={self.camera!r} is not allowed; allowed: {list(CAMERAS)}")
+        if self.hgm not in HGM_VARIANTS:
+            raise ValueError(f"observation hgm={self.hgm!r} is not allowed; allowed: {list(HGM_VARIANTS)}")
+        if not isinstance(self.coordinates, bool):
+            raise ValueError(f"observation coordinates={self.coordinates!r} is not allowed: expected true/false")
+        for name in ("height", "width"):
+            side = _positive_int(name, getattr(self, name))
+            if side < MIN_IMAGE_SIDE:
+                raise ValueError(
+                    f"observation.{name}={side} is not allowed: the conv stack 8/4, 4/2, 3/1 needs at least "
+                    f"{MIN_IMAGE_SIDE} pixels (it would output {conv_stack_output(side)})")
+        if _positive_int("frame_stack", self.frame_stack) < 1:
+            raise ValueError(f"observation.frame_stack={self.frame_stack} is not allowed: need >= 1")
+        if _positive_int("coord_k", self.coord_k) < 1:
+            raise ValueError(f"observation.coord_k={self.coord_k} is not allowed: need >= 1")
+        if _finite("v2x_range", self.v2x_range) <= 0:
+            raise ValueError(f"observation.v2x_range={self.v2x_range} is not allowed: need > 0 (m)")
+        fov = _finite("camera_fov_deg", self.camera_fov_deg)
+        if not 1.0 <= fov <= 170.0:
+            raise ValueError(f"observation.camera_fov_deg={fov} is not allowed: need 1..170 degrees "
+                             "(a pinhole camera cannot see 180 degrees)")
+        if _finite("camera_height", self.camera_height) <= 0:
+            raise ValueError(f"observation.camera_height={self.camera_height} is not allowed: need > 0 (m)")
+        if _finite("camera_max_range", self.camera_max_range) <= 0:
+            raise ValueError(f"observation.camera_max_range={self.camera_max_range} is not allowed: need > 0 (m)")
+        if self.camera == "none" and self.hgm == "none" and not self.coordinates:
+            # A non-learning driver needs no observation; that is fine, the builder then makes none.
+            pass
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The observation keys the streams ask for, in a fixed order."""
+        out = []
+        if self.camera != "none":
+            out.append("camera")
+        if self.hgm != "none":
+            out.append("hgm")
+        if self.coordinates:
+            out.append("coordinates")
+        return tuple(out)
+
+    @classmethod
+    def from_config(cls, observation_node: Any, streams_node: Any = None) -> ObservationConfig:
+        """From the root config's `observation` node and the model's `streams` node
+        (plain dicts or OmegaConf DictConfigs)."""
+        obs = _plain(observation_node)
+        streams = _plain(streams_node)
+        allowed_obs = {f.name for f in fields(cls)} - {"camera", "hgm", "coordinates"}
+        unknown = set(obs) - allowed_obs - {"camera", "hgm", "coordinates"}
+        if unknown:
+            raise ValueError(f"observation has unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed_obs)}")
+        unknown = set(streams) - {"camera", "hgm", "coordinates"}
+        if unknown:
+            raise ValueError(f"model.streams has unknown field(s) {sorted(unknown)}; "
+                             "allowed: ['camera', 'coordinates', 'hgm']")
+        merged = {**obs, **streams}
+        # YAML may spell "no stream" as null or false.
+        for key in ("camera", "hgm"):
+            if key in merged and merged[key] in (None, False):
+                merged[key] = "none"
+        if "coordinates" in merged and merged["coordinates"] is None:
+            merged["coordinates"] = False
+        return cls(**merged)
