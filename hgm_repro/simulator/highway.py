@@ -218,7 +218,7 @@ class HighwaySimulator:
         start = wants & ~changing & ~off_road & (~guarded | (gap_ok & direction_ok))
         target_lane = torch.where(start, desired_c, s.target_lane)
 
-        # --- longitudinal command (eq. 2); NPCs pushed below v_min by braking work back up.
+        # --- longitudinal command (eq. 2).
         # Guarded drivers hold a cruise speed that their random actions move by a_lon per second;
         # when the safety layer has braked them they work back up to it, so braking for others
         # does not drag the whole traffic down to v_min over time.
