@@ -97,11 +97,70 @@ def bench_observations(variant: str, n_envs: int, device: torch.device, seconds:
                 frame_stack=frame_stack, env_steps_per_s=round(calls * n_envs / elapsed, 1))
 
 
-def bench_learner(device: torch.device, seconds: float, batch_size: int = 64, size: int = 84) -> list[dict[str, Any]]:
-    """Gradient updates per second of the paper's network at its batch size (Table 4)."""
-    from .learner.bench import update_rate  # the learner owns how an update is built
+def _compose(*overrides: str) -> Any:
+    from hydra import compose, initialize_config_dir
 
-    return update_rate(device=device, seconds=seconds, batch_size=batch_size, image_size=size)
+    from . import CONF_DIR
+
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        return compose("config", overrides=list(overrides))
+
+
+def bench_learner_updates(device: torch.device, seconds: float, batch_size: int = 64,
+                          mode: str = "eager") -> dict[str, Any]:
+    """Gradient updates per second of the paper's network (84x84, 4 frames) at Table 4's batch size,
+    built by the learner's own builders; `mode` is eager, compile or cuda_graph."""
+    from tensordict import TensorDict
+
+    from .learner.builders import make_actor, make_loss, make_network, make_update
+    from .simulator import N_ACTIONS
+
+    cfg = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
+                   f"learner.compile={mode == 'compile'}", f"learner.cuda_graph={mode == 'cuda_graph'}")
+    net = make_network(cfg).to(device)
+    actor = make_actor(net).to(device)
+    loss = make_loss(cfg, actor).to(device)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=float(cfg.learner.lr))
+    update = make_update(cfg, loss, optimizer, device)
+    h, w, f = int(cfg.observation.height), int(cfg.observation.width), int(cfg.observation.frame_stack)
+    gen = torch.Generator(device=device).manual_seed(0)
+
+    def images() -> torch.Tensor:
+        return torch.randint(0, 256, (batch_size, 3 * f, h, w), dtype=torch.uint8, device=device, generator=gen)
+
+    action = torch.nn.functional.one_hot(torch.randint(0, N_ACTIONS, (batch_size,), device=device), N_ACTIONS)
+    flags = torch.zeros(batch_size, 1, dtype=torch.bool, device=device)
+    batch = TensorDict({
+        "camera": images(), "hgm": images(), "action": action.bool(),
+        "next": {"camera": images(), "hgm": images(), "reward": torch.randn(batch_size, 1, device=device),
+                 "done": flags, "terminated": flags.clone(), "truncated": flags.clone()},
+    }, batch_size=[batch_size], device=device)
+    calls, elapsed = _timed(lambda: update(batch.clone()), device, seconds, warmup=12)
+    params = sum(p.numel() for p in net.parameters())
+    return dict(what="learner update", device=str(device), n_envs=0, camera="front", hgm="paper", mode=mode,
+                batch_size=batch_size, image=f"{h}x{w}", parameters=params, env_steps_per_s=None,
+                updates_per_s=round(calls / elapsed, 1))
+
+
+def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, Any]:
+    """Training env-steps per second end to end (collection, replay, updates) with the quick preset."""
+    import tempfile
+    from pathlib import Path
+
+    from .learner import train
+
+    n_envs = 16 if device.type == "cpu" else 64
+    cfg = _compose("experiment=quick", f"device={device}", f"learner.total_steps={total_steps}",
+                   f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
+                   f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        train(cfg, Path(tmp), lambda metrics, step: None)
+        _sync(device)
+        elapsed = time.perf_counter() - start
+    return dict(what="learner training (quick preset, end to end)", device=str(device), n_envs=n_envs,
+                camera="front", hgm="paper", image=f"{cfg.observation.height}x{cfg.observation.width}",
+                update_every=int(cfg.learner.update_every), env_steps_per_s=round(total_steps / elapsed, 1))
 
 
 def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[str, Any] | None:
@@ -140,6 +199,8 @@ def main(argv: list[str] | None = None) -> int:
                         help="batch sizes for the simulator on CUDA, when a GPU is there (default: %(default)s)")
     parser.add_argument("--obs-n-envs", type=int, default=256, help="batch size for observations (%(default)s)")
     parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement (default: %(default)s)")
+    parser.add_argument("--train-steps", type=int, default=2048,
+                        help="env steps of the end-to-end training measurement (x8 on CUDA) (%(default)s)")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--device", choices=["cpu", "cuda", "all"], default="all",
                         help="which devices to measure (default: every one present)")
@@ -175,9 +236,12 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"simulator+{variant} n_envs={n} on {device}...", file=sys.stderr)
                 emit(bench_observations(variant, n, device, args.seconds))
         if "learner" in parts:
-            print(f"learner on {device}...", file=sys.stderr)
-            for row in bench_learner(device, args.seconds):
-                emit(row)
+            modes = ["eager", "compile", "cuda_graph"] if gpu else ["eager"]
+            for mode in modes:
+                print(f"learner update ({mode}) on {device}...", file=sys.stderr)
+                emit(bench_learner_updates(device, args.seconds, mode=mode))
+            print(f"learner training on {device}...", file=sys.stderr)
+            emit(bench_learner_training(device, total_steps=args.train_steps * (8 if gpu else 1)))
     if "highway" in parts:
         for observation in ("Kinematics", "Grayscale"):
             print(f"highway-env ({observation})...", file=sys.stderr)
