@@ -1,0 +1,125 @@
+"""Test procedure: drive a fixed number of decisions in one scenario and report every episode.
+
+A learned model runs its greedy policy (no exploration) from a checkpoint; a non-learning model
+(`cfg.model.learned == false`: the human-driven host, IDM + MOBIL, random) drives the host
+through its driver object. Both go through the same TorchRL env and the same loop, so their
+metrics are computed identically: the env's per-episode `episode` outputs, read where `done`.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import hydra.utils
+import pandas as pd
+import torch
+from omegaconf import DictConfig
+from tensordict import TensorDictBase
+from torch.nn import functional as F
+from torchrl.envs.utils import ExplorationType, set_exploration_type
+
+from .checkpoint import load_checkpoint
+from .envs import make_env
+from .simulator import N_ACTIONS
+
+EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m",
+                   "episode_return", "decisions")
+
+# Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
+# and the same for every model, so that methods meet the same traffic draws.
+EVAL_SEED_OFFSET = 100_000
+
+
+@dataclass
+class EvaluationResult:
+    """`episodes`: one row per episode (EPISODE_METRICS columns); `means`: `eval/<metric>` over rows.
+
+    `partial` is True when no episode finished within the test budget: the rows are then the
+    unfinished episodes so far, and their metrics cover fewer decisions than an episode.
+    """
+
+    episodes: pd.DataFrame
+    means: dict[str, float] = field(default_factory=dict)
+    partial: bool = False
+    decisions: int = 0
+
+
+Policy = Callable[[TensorDictBase], TensorDictBase]
+
+
+def _learned_policy(cfg: DictConfig, checkpoint: Path | None, device: torch.device) -> Policy:
+    from .learner.builders import make_actor, make_network
+
+    if checkpoint is None:
+        raise ValueError(f"model '{cfg.model.name}' is learned: evaluate() needs its checkpoint")
+    # Only the architecture must match: a model trained once is tested in every scenario.
+    state = load_checkpoint(Path(checkpoint), cfg, strict=False, map_location="cpu")
+    net = make_network(cfg)
+    net.load_state_dict(state["network"])
+    net.to(device).eval()
+    return make_actor(net).to(device)
+
+
+def _driver_policy(cfg: DictConfig, env) -> Policy:
+    driver = hydra.utils.instantiate(cfg.model.driver)
+    env.simulator.host_safety_layer = bool(driver.safety_layer)
+
+    def policy(td: TensorDictBase) -> TensorDictBase:
+        action = driver.act(env.simulator)
+        return td.set("action", F.one_hot(action.long(), N_ACTIONS).to(env.device))
+
+    return policy
+
+
+def _unfinished_episodes(env) -> pd.DataFrame:
+    """Metrics of the episodes in progress, from the simulator's per-episode accumulators."""
+    s = env.simulator.state
+    decisions = s.decision.float()
+    rows = {
+        "avg_speed_kmh": s.ep_speed_sum / decisions.clamp(min=1) * 3.6, "lane_changes": s.ep_lane_changes,
+        "overtakes": s.ep_overtakes, "collisions": s.ep_collisions, "dangerous_actions": s.ep_dangerous,
+        "distance_m": s.ep_distance, "episode_return": s.ep_return, "decisions": decisions,
+    }
+    return pd.DataFrame({k: v.float().cpu().numpy() for k, v in rows.items()})
+
+
+@torch.no_grad()
+def evaluate(cfg: DictConfig, scenario_node, checkpoint: Path | None) -> EvaluationResult:
+    """Run `learner.test_steps` decisions (over `learner.test_envs` envs) in `scenario_node`'s traffic."""
+    device = torch.device(cfg.device)
+    if int(cfg.learner.get("torch_threads", 0)) > 0:
+        torch.set_num_threads(int(cfg.learner.torch_threads))
+    n_envs = int(cfg.learner.test_envs)
+    env = make_env(cfg, scenario_node, n_envs=n_envs, seed=int(cfg.seed) + EVAL_SEED_OFFSET)
+    if cfg.model.get("learned", True):
+        policy = _learned_policy(cfg, checkpoint, device)
+    else:
+        policy = _driver_policy(cfg, env)
+
+    rows: list[pd.DataFrame] = []
+    iterations = math.ceil(int(cfg.learner.test_steps) / n_envs)
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        td = env.reset()
+        for _ in range(iterations):
+            td = policy(td)
+            transition, td = env.step_and_maybe_reset(td)  # td: the next step's input (reset where done)
+            done = transition["next", "done"].reshape(-1)
+            if done.any():
+                finished = transition["next", "episode"][done]
+                rows.append(pd.DataFrame({k: finished[k].float().cpu().numpy() for k in EPISODE_METRICS}))
+
+    partial = not rows
+    if partial:
+        warnings.warn(f"no episode finished in {iterations} decisions per env: reporting the unfinished ones "
+                      f"(raise learner.test_steps)", stacklevel=2)
+        rows.append(_unfinished_episodes(env))
+    episodes = pd.concat(rows, ignore_index=True)
+    means = {f"eval/{k}": float(episodes[k].mean()) for k in EPISODE_METRICS}
+    means["eval/episodes"] = float(len(episodes))
+    means["eval/partial"] = float(partial)
+    env.close()
+    return EvaluationResult(episodes=episodes, means=means, partial=partial, decisions=iterations * n_envs)

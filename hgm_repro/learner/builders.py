@@ -1,0 +1,108 @@
+"""Small builders for the Dueling DQN + PER learner, one TorchRL part each (as in TorchRL's sota DQN)."""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+
+import hydra.utils
+import torch
+from omegaconf import DictConfig
+from tensordict import TensorDict, TensorDictBase
+from tensordict.nn import TensorDictModule, TensorDictSequential
+from torch import nn
+from torchrl.data import LazyTensorStorage, OneHot, TensorDictPrioritizedReplayBuffer
+from torchrl.modules import EGreedyModule, QValueActor
+from torchrl.objectives import DQNLoss
+
+from ..simulator import N_ACTIONS
+from .priority_trees import install_if_missing
+
+install_if_missing()
+
+# Key the replay buffer reads priorities from; DQNLoss writes its (squared) TD error there.
+PRIORITY_KEY = "td_error"
+
+
+def network_kwargs(cfg: DictConfig) -> dict:
+    """Input sizes every network constructor receives, from the observation config."""
+    obs = cfg.observation
+    frames = int(obs.frame_stack)
+    return {"n_actions": N_ACTIONS, "in_channels": 3 * frames, "image_size": (int(obs.height), int(obs.width)),
+            "coord_dim": frames * int(obs.coord_k) * 6}
+
+
+def make_network(cfg: DictConfig) -> nn.Module:
+    """The model's Q-network from `cfg.model.network` (`_target_`), sized for `cfg.observation`."""
+    if not cfg.model.get("learned", True) or cfg.model.get("network") is None:
+        raise ValueError(f"model '{cfg.model.name}' is not a learned model: it has no network to train")
+    return hydra.utils.instantiate(cfg.model.network, **network_kwargs(cfg), _convert_="all")
+
+
+def make_actor(net: nn.Module) -> QValueActor:
+    """Greedy Q-value actor: reads the network's `in_keys`, writes a one-hot `action`."""
+    module = TensorDictModule(net, in_keys=list(net.in_keys), out_keys=["action_value"])
+    return QValueActor(module, spec=OneHot(N_ACTIONS), action_space="one-hot")
+
+
+def make_exploration(cfg: DictConfig, device: torch.device) -> EGreedyModule:
+    """Epsilon-greedy over the actor's action, annealed linearly over `eps_steps` env steps."""
+    learner = cfg.learner
+    return EGreedyModule(OneHot(N_ACTIONS, device=device), eps_init=float(learner.eps_start),
+                         eps_end=float(learner.eps_end), annealing_num_steps=int(learner.eps_steps),
+                         device=device)
+
+
+def make_policy(actor: QValueActor, exploration: EGreedyModule) -> TensorDictSequential:
+    return TensorDictSequential(actor, exploration)
+
+
+def make_loss(cfg: DictConfig, actor: QValueActor) -> DQNLoss:
+    """DQN loss with a delayed (target) copy of the network; Double DQN from config."""
+    learner = cfg.learner
+    loss = DQNLoss(actor, loss_function=str(learner.get("loss_function", "l2")), delay_value=True,
+                   double_dqn=bool(learner.double_dqn), action_space="one-hot")
+    loss.make_value_estimator(gamma=float(learner.gamma))
+    return loss
+
+
+def make_replay_buffer(cfg: DictConfig, device: torch.device) -> TensorDictPrioritizedReplayBuffer:
+    """Proportional prioritized replay over flat transitions, stored on the training device."""
+    learner = cfg.learner
+    return TensorDictPrioritizedReplayBuffer(
+        alpha=float(learner.per_alpha), beta=float(learner.per_beta_start),
+        storage=LazyTensorStorage(int(learner.buffer_size), device=device),
+        batch_size=int(learner.batch_size), priority_key=PRIORITY_KEY)
+
+
+def make_update(cfg: DictConfig, loss_module: DQNLoss, optimizer: torch.optim.Optimizer,
+                device: torch.device) -> Callable[[TensorDictBase], TensorDict]:
+    """One gradient step on a sampled batch -> TensorDict(loss, td_error, grad_norm).
+
+    The TD error is returned rather than read back from the batch because a CUDA-graph
+    captured update works on its own static copy of the input.
+    """
+    max_grad_norm = float(cfg.learner.max_grad_norm)
+    params = list(loss_module.parameters())
+
+    def update(batch: TensorDictBase) -> TensorDict:
+        loss = loss_module(batch)["loss"]
+        optimizer.zero_grad(set_to_none=False)
+        loss.backward()
+        grad_norm = torch.nn.utils.clip_grad_norm_(params, max_grad_norm)
+        optimizer.step()
+        return TensorDict(loss=loss.detach(), td_error=batch.get(PRIORITY_KEY).detach(),
+                          grad_norm=grad_norm.detach())
+
+    if cfg.learner.get("compile", False):
+        update = torch.compile(update)
+    if cfg.learner.get("cuda_graph", False):
+        if device.type != "cuda":
+            warnings.warn("learner.cuda_graph=true needs device=cuda; ignored on " + str(device), stacklevel=2)
+        else:
+            from tensordict.nn import CudaGraphModule
+
+            # The first calls run eagerly (warm-up) so that lazy state such as Adam's moments
+            # exists before capture.
+            update = CudaGraphModule(update, warmup=10)
+    return update

@@ -1,0 +1,241 @@
+"""Dueling DQN + prioritized replay on TorchRL: the whole training loop, top to bottom.
+
+See the package docstring (`hgm_repro.learner`) for what a checkpoint holds and what a resume restores.
+"""
+
+from __future__ import annotations
+
+import math
+import random
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from omegaconf import DictConfig
+from tensordict import TensorDictBase
+from torchrl.collectors import Collector
+from torchrl.data.replay_buffers.scheduler import LinearScheduler
+from torchrl.objectives import HardUpdate
+from tqdm import tqdm
+
+from ..checkpoint import config_fingerprint, load_checkpoint, save_checkpoint, training_config
+from ..envs import make_env
+from ..networks import param_counts
+from .builders import (
+    make_actor,
+    make_exploration,
+    make_loss,
+    make_network,
+    make_policy,
+    make_replay_buffer,
+    make_update,
+)
+
+Log = Callable[[dict[str, float], int], None]
+
+# Per-episode metrics logged as train/<name> (means over episodes finished since the last log).
+TRAIN_EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "episode_return", "collisions")
+
+
+class NonFiniteLossError(FloatingPointError):
+    """The TD loss became NaN or infinite: training stops rather than writing broken weights."""
+
+
+def _rng_state() -> dict[str, Any]:
+    state = {"torch": torch.get_rng_state(), "numpy": np.random.get_state(), "python": random.getstate()}
+    if torch.cuda.is_available():
+        state["cuda"] = torch.cuda.get_rng_state_all()
+    return state
+
+
+def _set_rng_state(state: dict[str, Any]) -> None:
+    torch.set_rng_state(state["torch"])
+    np.random.set_state(state["numpy"])
+    random.setstate(state["python"])
+    if "cuda" in state and torch.cuda.is_available():
+        torch.cuda.set_rng_state_all(state["cuda"])
+
+
+def _buffer_megabytes(buffer) -> float:
+    if len(buffer) == 0:
+        return 0.0
+    one = buffer.storage[0]
+    return len(buffer) * one.bytes() / 2**20
+
+
+def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
+    """Train `cfg.model` on `cfg.train_scenario`; returns the final checkpoint's path.
+
+    Resumes from `checkpoint_dir/last.pt` when it exists (and belongs to this config), and
+    returns `final.pt` at once when the run already finished.
+    """
+    L = cfg.learner
+    checkpoint_dir = Path(checkpoint_dir)
+    last_path, final_path = checkpoint_dir / "last.pt", checkpoint_dir / "final.pt"
+    device = torch.device(cfg.device)
+    config = training_config(cfg)
+    fingerprint = config_fingerprint(config)
+
+    resume = None
+    for path in (final_path, last_path):
+        if path.exists():
+            # On the CPU: RNG states must stay CPU tensors; load_state_dict moves weights to `device`.
+            resume = load_checkpoint(path, cfg, strict=True, map_location="cpu")  # refuses a foreign one
+            break
+    if resume is not None and resume["finished"]:
+        return final_path if final_path.exists() else save_checkpoint(resume, final_path)
+
+    if int(L.get("torch_threads", 0)) > 0:
+        torch.set_num_threads(int(L.torch_threads))
+    torch.manual_seed(int(cfg.seed))
+    np.random.seed(int(cfg.seed))
+    random.seed(int(cfg.seed))
+
+    # --- the parts: env, network, policy, loss, target updater, optimiser, replay ---------------
+    n_envs = int(L.n_envs)
+    frames_per_batch = n_envs  # one decision in every env per batch
+    # Round the total up to whole batches so that a fresh and a resumed run stop at the same step.
+    total_steps = math.ceil(int(L.total_steps) / frames_per_batch) * frames_per_batch
+    warmup_steps = math.ceil(int(L.warmup_steps) / frames_per_batch) * frames_per_batch
+    update_every = float(L.update_every)
+
+    steps_done = int(resume["env_steps"]) if resume else 0
+    env = make_env(cfg, cfg.train_scenario, n_envs=n_envs, seed=int(cfg.seed))
+    net = make_network(cfg).to(device)
+    actor = make_actor(net).to(device)
+    exploration = make_exploration(cfg, device)
+    policy = make_policy(actor, exploration)
+    loss_module = make_loss(cfg, actor).to(device)
+    updates_per_target = max(1, round(int(L.target_update_steps) / update_every))
+    # HardUpdate copies on the (interval + 1)-th call: interval = period - 1 gives exactly one
+    # copy every target_update_steps env steps.
+    target_updater = HardUpdate(loss_module, value_network_update_interval=updates_per_target - 1)
+    optimizer = torch.optim.Adam(loss_module.parameters(), lr=float(L.lr),
+                                 capturable=bool(L.get("cuda_graph", False)) and device.type == "cuda")
+    buffer = make_replay_buffer(cfg, device)
+    n_batches = total_steps // frames_per_batch
+    beta_schedule = LinearScheduler(buffer, "beta", final_value=float(L.per_beta_end), num_steps=n_batches)
+    update = make_update(cfg, loss_module, optimizer, device)
+
+    updates_done, update_credit = 0, 0.0
+    if resume:
+        net.load_state_dict(resume["network"])
+        loss_module.load_state_dict(resume["loss"])  # online and target weights
+        optimizer.load_state_dict(resume["optimizer"])
+        exploration.load_state_dict(resume["exploration"])
+        beta_schedule.load_state_dict(resume["beta_schedule"])
+        buffer.sampler.beta = resume["beta"]
+        target_updater.counter = resume["target_counter"]
+        updates_done, update_credit = resume["updates"], resume["update_credit"]
+        if resume["replay_buffer"] is not None:
+            buffer.load_state_dict(resume["replay_buffer"])
+        _set_rng_state(resume["rng"])
+        # The traffic restarts from fresh episodes (the simulator state is not stored), drawn from
+        # the restored generator so that a resume is deterministic and does not replay episode one.
+        env.simulator.generator.set_state(resume["env_rng"])
+
+    # Updates start once the buffer holds the warm-up's worth of transitions. On a fresh run that
+    # is exactly `warmup_steps` steps of random actions; on a resume without a stored buffer the
+    # restored epsilon-greedy policy refills it first (those steps count as env steps).
+    learn_from = min(warmup_steps, int(L.buffer_size))
+    collector = Collector(
+        env, policy, frames_per_batch=frames_per_batch, total_frames=total_steps - steps_done,
+        init_random_frames=max(0, warmup_steps - steps_done), device=device, storing_device=device,
+        auto_register_policy_transforms=False)  # the Q-network is feed-forward: no InitTracker needed
+
+    def checkpoint_state(finished: bool) -> dict[str, Any]:
+        small = _buffer_megabytes(buffer) <= float(L.get("checkpoint_buffer_max_mb", 256))
+        return {
+            "format": 1, "model": cfg.model.name, "fingerprint": fingerprint, "training_config": config,
+            "finished": finished, "env_steps": steps_done, "updates": updates_done, "update_credit": update_credit,
+            "network": net.state_dict(), "loss": loss_module.state_dict(), "optimizer": optimizer.state_dict(),
+            "exploration": exploration.state_dict(), "epsilon": float(exploration.eps),
+            "beta_schedule": beta_schedule.state_dict(), "beta": float(buffer.sampler.beta),
+            "target_counter": target_updater.counter,
+            "replay_buffer": buffer.state_dict() if small else None,
+            "rng": _rng_state(), "env_rng": env.simulator.generator.get_state(),
+        }
+
+    log(param_counts(net), 0)
+    progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {cfg.model.name}",
+                    disable=not sys.stdout.isatty(), dynamic_ncols=True)
+    episodes: dict[str, list[float]] = {k: [] for k in TRAIN_EPISODE_METRICS}
+    losses: list[torch.Tensor] = []
+    last_log_steps, last_log_time = steps_done, time.perf_counter()
+    recent_speed = float("nan")
+
+    # --- the loop: collect one step of every env, store it, learn, log, checkpoint ---------------
+    for batch in collector:
+        batch: TensorDictBase = batch.reshape(-1)
+        steps_before, steps_done = steps_done, steps_done + batch.numel()
+        exploration.step(batch.numel())
+        beta_schedule.step()
+        buffer.extend(batch.exclude("collector", "episode", "reward_terms", ("next", "episode"),
+                                    ("next", "reward_terms")))
+
+        done = batch["next", "done"].reshape(-1)
+        if done.any():
+            finished = batch["next", "episode"][done]
+            for key in TRAIN_EPISODE_METRICS:
+                episodes[key].extend(finished[key].tolist())
+            recent_speed = float(finished["avg_speed_kmh"].mean())
+
+        if len(buffer) >= learn_from:
+            update_credit += batch.numel() / update_every
+            batch_losses = []
+            while update_credit >= 1.0:
+                update_credit -= 1.0
+                sample = buffer.sample()
+                out = update(sample)
+                # DQNLoss stores the squared TD error; PER's priority is |delta| (to the alpha).
+                # nan_to_num keeps the sum tree valid until the check below stops the run.
+                priority = torch.nan_to_num(out["td_error"].sqrt(), nan=1.0, posinf=1.0)
+                buffer.update_priority(sample["index"], priority)
+                target_updater.step()
+                batch_losses.append(out["loss"])
+                updates_done += 1
+            if batch_losses:
+                batch_loss = torch.stack(batch_losses)
+                if not torch.isfinite(batch_loss).all():
+                    progress.close()
+                    collector.shutdown()
+                    raise NonFiniteLossError(
+                        f"training loss became {batch_loss.tolist()} at env step {steps_done} (update {updates_done}) "
+                        f"for model '{cfg.model.name}'; stopped. The last good checkpoint is {last_path} "
+                        f"(if one was written). Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
+                losses.append(batch_loss.mean())
+            collector.update_policy_weights_()
+
+        progress.update(batch.numel())
+        if progress.n % (50 * frames_per_batch) < frames_per_batch:
+            progress.set_postfix(eps=f"{float(exploration.eps):.3f}", speed_kmh=f"{recent_speed:.1f}", refresh=False)
+
+        if steps_done // int(L.log_every) > steps_before // int(L.log_every) or steps_done >= total_steps:
+            now = time.perf_counter()
+            metrics = {f"train/{k}": float(np.mean(v)) for k, v in episodes.items() if v}
+            if losses:
+                metrics["train/loss"] = float(torch.stack(losses).mean())
+            metrics.update({"train/epsilon": float(exploration.eps), "train/beta": float(buffer.sampler.beta),
+                            "train/steps_per_s": (steps_done - last_log_steps) / max(now - last_log_time, 1e-9),
+                            "train/episodes": float(len(episodes["avg_speed_kmh"])),
+                            "train/updates": float(updates_done)})
+            log(metrics, steps_done)
+            episodes = {k: [] for k in TRAIN_EPISODE_METRICS}
+            losses = []
+            last_log_steps, last_log_time = steps_done, now
+
+        if steps_done // int(L.checkpoint_every) > steps_before // int(L.checkpoint_every) and steps_done < total_steps:
+            save_checkpoint(checkpoint_state(finished=False), last_path)
+
+    progress.close()
+    collector.shutdown()
+    if steps_done < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
+        warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
+    final = checkpoint_state(finished=True)
+    save_checkpoint(final, last_path)
+    return save_checkpoint(final, final_path)

@@ -1,0 +1,268 @@
+"""The typed shape of a job's config, checked at job start before any work is done.
+
+Hydra already rejects unknown config-group options (`scenario=7`, `model=nope`) and unknown
+keys (struct mode). What it cannot know is that `learner.lr=-1` or `learner.batch_size=abc`
+is nonsense: command-line values arrive as whatever YAML makes of them. `validate(cfg)`
+checks every value named here against its type and range, and the simulator and scenario
+nodes through the simulator's own validated configs, and raises one `ConfigError` listing
+every problem. Keys that a part adds and this schema does not name are left to that part.
+"""
+
+from __future__ import annotations
+
+import re
+import types
+import typing
+from collections.abc import Callable, Mapping
+from dataclasses import MISSING, dataclass, field, fields
+from typing import Any, Literal
+
+from omegaconf import DictConfig, OmegaConf
+
+from .simulator.config import ConfigError, ScenarioConfig, SimulatorConfig
+from .simulator.loading import scenario_config, simulator_config
+
+
+@dataclass(frozen=True)
+class Check:
+    """A range rule on a value, with the words the error message uses for it."""
+
+    test: Callable[[Any], bool]
+    says: str
+
+
+def gt(x: float) -> dict[str, Check]:
+    return {"check": Check(lambda v: v > x, f"must be > {x}")}
+
+
+def ge(x: float) -> dict[str, Check]:
+    return {"check": Check(lambda v: v >= x, f"must be >= {x}")}
+
+
+def unit() -> dict[str, Check]:
+    return {"check": Check(lambda v: 0.0 <= v <= 1.0, "must lie in [0, 1]")}
+
+
+DEVICE_PATTERN = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
+
+
+@dataclass(frozen=True)
+class LearnerSchema:
+    name: str
+    lr: float = field(metadata=gt(0))
+    gamma: float = field(metadata=unit())
+    batch_size: int = field(metadata=ge(1))
+    warmup_steps: int = field(metadata=ge(0))
+    buffer_size: int = field(metadata=ge(1))
+    target_update_steps: int = field(metadata=ge(1))
+    total_steps: int = field(metadata=ge(1))
+    eps_start: float = field(metadata=unit())
+    eps_end: float = field(metadata=unit())
+    eps_steps: int = field(metadata=ge(1))
+    update_every: int = field(metadata=ge(1))
+    double_dqn: bool
+    per_alpha: float = field(metadata=ge(0))
+    per_beta_start: float = field(metadata=unit())
+    per_beta_end: float = field(metadata=unit())
+    n_envs: int = field(metadata=ge(1))
+    test_steps: int = field(metadata=ge(1))
+    test_envs: int = field(metadata=ge(1))
+    checkpoint_every: int = field(metadata=ge(1))
+    log_every: int = field(metadata=ge(1))
+    max_grad_norm: float = field(metadata=gt(0))
+    compile: bool = False
+    cuda_graph: bool = False
+
+
+@dataclass(frozen=True)
+class ObservationSchema:
+    height: int = field(metadata=ge(1))
+    width: int = field(metadata=ge(1))
+    frame_stack: int = field(metadata=ge(1))
+    v2x_range: float = field(metadata=gt(0))
+    coord_k: int = field(metadata=ge(1))
+    camera_fov_deg: float = field(metadata={"check": Check(lambda v: 0 < v < 180, "must lie in (0, 180)")})
+    camera_height: float = field(metadata=gt(0))
+    camera_max_range: float = field(metadata=gt(0))
+
+
+@dataclass(frozen=True)
+class StreamsSchema:
+    camera: Literal["front", "birdseye", "none"]
+    hgm: Literal["paper", "enriched", "none"]
+    coordinates: bool
+
+
+@dataclass(frozen=True)
+class ModelSchema:
+    name: str
+    learned: bool
+    streams: StreamsSchema
+    network: dict[str, Any] | None = None  # learned models: instantiated with `_target_`
+    driver: dict[str, Any] | None = None  # non-learning hosts: instantiated with `_target_`
+
+
+@dataclass(frozen=True)
+class TrackingSchema:
+    uri: str | None = None
+    experiment_name: str = "hgm_repro"
+    artifact_dir: str | None = None
+    checkpoint_dir: str | None = None
+    log_gif: bool = True
+
+
+@dataclass(frozen=True)
+class ExperimentSchema:
+    name: str
+
+
+@dataclass(frozen=True)
+class JobConfig:
+    """What `validate` hands back: the typed parts plus the simulator's own validated configs."""
+
+    seed: int
+    device: str
+    force_retrain: bool
+    learner: LearnerSchema
+    observation: ObservationSchema
+    model: ModelSchema
+    tracking: TrackingSchema
+    experiment: ExperimentSchema
+    simulator: SimulatorConfig
+    scenario: ScenarioConfig
+    train_scenario: ScenarioConfig
+
+
+def _type_name(tp: Any) -> str:
+    if typing.get_origin(tp) is Literal:
+        return "one of " + ", ".join(repr(a) for a in typing.get_args(tp))
+    names = {int: "an integer", float: "a number", bool: "true or false", str: "a string"}
+    if tp in names:
+        return names[tp]
+    if isinstance(tp, types.UnionType):
+        return " or ".join(_type_name(a) if a is not type(None) else "null" for a in typing.get_args(tp))
+    if typing.get_origin(tp) is dict:
+        return "a mapping"
+    return getattr(tp, "__name__", str(tp))
+
+
+def _matches(tp: Any, value: Any) -> bool:
+    if tp is Any:
+        return True
+    if tp is type(None):
+        return value is None
+    if isinstance(tp, types.UnionType):
+        return any(_matches(a, value) for a in typing.get_args(tp))
+    if typing.get_origin(tp) is Literal:
+        return value in typing.get_args(tp)
+    if typing.get_origin(tp) is dict:
+        return isinstance(value, Mapping)
+    if tp is bool:
+        return isinstance(value, bool)
+    if tp is int:  # YAML's `true` is not a count
+        return isinstance(value, int) and not isinstance(value, bool)
+    if tp is float:
+        return isinstance(value, (int, float)) and not isinstance(value, bool)
+    return isinstance(value, tp)
+
+
+def check_node(schema: type, node: Any, where: str, errors: list[str]) -> Any:
+    """Build `schema` from `node`, appending one message per bad value to `errors`."""
+    if not isinstance(node, Mapping):
+        errors.append(f"{where}={node!r} is not allowed: expected a mapping")
+        return None
+    hints = typing.get_type_hints(schema)
+    values: dict[str, Any] = {}
+    for f in fields(schema):
+        path = f"{where}.{f.name}" if where else f.name
+        if f.name not in node:
+            if f.default is MISSING:
+                errors.append(f"{path} is missing: expected {_type_name(hints[f.name])}")
+            continue
+        value, tp = node[f.name], hints[f.name]
+        if isinstance(tp, type) and hasattr(tp, "__dataclass_fields__"):
+            values[f.name] = check_node(tp, value, path, errors)
+            continue
+        if not _matches(tp, value):
+            errors.append(f"{path}={value!r} is not allowed: expected {_type_name(tp)}")
+            continue
+        rule: Check | None = f.metadata.get("check")
+        if rule is not None and not rule.test(value):
+            errors.append(f"{path}={value!r} is not allowed: {rule.says}")
+            continue
+        values[f.name] = float(value) if tp is float else value
+    try:
+        return schema(**values)
+    except TypeError:  # a required field was reported missing above
+        return None
+
+
+def _check_model(model: Any, errors: list[str]) -> None:
+    if not isinstance(model, ModelSchema):
+        return
+    part = "network" if model.learned else "driver"
+    node = model.network if model.learned else model.driver
+    if not node or "_target_" not in node:
+        kind = "learned" if model.learned else "non-learning"
+        errors.append(f"model.{part} with a `_target_` is required for a {kind} model ({model.name!r})")
+
+
+def _check_device(device: Any, errors: list[str]) -> None:
+    if not isinstance(device, str) or not DEVICE_PATTERN.match(device):
+        errors.append(f"device={device!r} is not allowed: expected cpu, cuda, cuda:N or mps")
+        return
+    if device.startswith("cuda"):
+        import torch  # only when asked: keeps validation of CPU jobs light
+
+        if not torch.cuda.is_available():
+            errors.append(f"device={device!r} is not available here: torch.cuda.is_available() is False")
+        elif ":" in device and int(device.split(":")[1]) >= torch.cuda.device_count():
+            errors.append(f"device={device!r} is not available: {torch.cuda.device_count()} CUDA device(s)")
+
+
+def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
+    """Check the whole job config; raise `ConfigError` listing every bad value."""
+    root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+    errors: list[str] = []
+    parts = {
+        "learner": check_node(LearnerSchema, root.get("learner"), "learner", errors),
+        "observation": check_node(ObservationSchema, root.get("observation"), "observation", errors),
+        "model": check_node(ModelSchema, root.get("model"), "model", errors),
+        "tracking": check_node(TrackingSchema, root.get("tracking"), "tracking", errors),
+        "experiment": check_node(ExperimentSchema, root.get("experiment"), "experiment", errors),
+    }
+    _check_model(parts["model"], errors)
+    seed = root.get("seed")
+    if not _matches(int, seed) or seed < 0:
+        errors.append(f"seed={seed!r} is not allowed: expected an integer >= 0")
+    _check_device(root.get("device"), errors)
+    if not isinstance(root.get("force_retrain"), bool):
+        errors.append(f"force_retrain={root.get('force_retrain')!r} is not allowed: expected true or false")
+    learner = parts["learner"]
+    if isinstance(learner, LearnerSchema) and learner.buffer_size < learner.batch_size:
+        errors.append(
+            f"learner.buffer_size={learner.buffer_size} is not allowed: "
+            f"must be >= learner.batch_size={learner.batch_size}"
+        )
+
+    # The simulator owns its rules; collect its message with the others.
+    sim = scenario = train_scenario = None
+    try:
+        sim = simulator_config(root.get("simulator"))
+    except ConfigError as e:
+        errors.append(str(e))
+    if sim is not None:
+        for name in ("scenario", "train_scenario"):
+            try:
+                built = scenario_config(root.get(name), sim)
+            except ConfigError as e:
+                errors.append(f"{name}: {e}")
+                continue
+            scenario, train_scenario = (built, train_scenario) if name == "scenario" else (scenario, built)
+
+    if errors:
+        raise ConfigError("invalid config:\n  " + "\n  ".join(errors))
+    return JobConfig(
+        seed=seed, device=root["device"], force_retrain=root["force_retrain"], simulator=sim,
+        scenario=scenario, train_scenario=train_scenario, **parts,
+    )

@@ -1,0 +1,309 @@
+"""MLflow tracking: where the store is, how runs are opened, tagged, logged and closed.
+
+Every call goes through `MlflowClient` (no fluent, process-global active run), because one
+process may hold a sweep's parent run, a training run and an evaluation run at once.
+The default store is a SQLite file that parallel jobs share, so store creation happens under
+a file lock and every write is retried while SQLite answers "database is locked".
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import os
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, TypeVar
+
+from filelock import FileLock
+from hydra.experimental.callback import Callback
+from omegaconf import DictConfig, OmegaConf
+
+from . import PACKAGE_ROOT
+from .interrupts import protected
+
+log = logging.getLogger(__name__)
+T = TypeVar("T")
+
+# MLflow's limits, the older (stricter) server values so that any server accepts our batches.
+MAX_PARAM_VALUE = 500
+PARAMS_PER_BATCH = 100
+METRICS_PER_BATCH = 1000
+# Tags every job run carries (architecture.md); analysis filters on them.
+RUN_TAGS = ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty")
+PARENT_RUN_ENV = "HGM_REPRO_PARENT_RUN_ID"  # how a sweep's parent run id reaches its jobs
+
+
+@dataclass(frozen=True)
+class StoreLocation:
+    """Where runs, artifacts and checkpoints of this launch go (all absolute)."""
+
+    tracking_uri: str
+    artifact_location: str | None  # None: the server decides (remote stores)
+    checkpoint_root: Path
+    lock_path: Path  # serialises store and experiment creation between processes
+
+    @property
+    def is_local(self) -> bool:
+        return self.tracking_uri.startswith("sqlite:") or self.tracking_uri.startswith("file:")
+
+
+def resolve_location(tracking: Mapping[str, Any] | DictConfig, launch_dir: Path) -> StoreLocation:
+    """Make `tracking.*` absolute against the directory the command was started from."""
+    launch_dir = Path(launch_dir).resolve()
+
+    def under_launch(value: str | None, default: str) -> Path:
+        return (launch_dir / (value or default)).resolve()  # an absolute value replaces launch_dir
+
+    uri = tracking.get("uri")
+    checkpoint_root = under_launch(tracking.get("checkpoint_dir"), "checkpoints")
+    if uri:
+        return StoreLocation(str(uri), None, checkpoint_root, checkpoint_root.parent / ".mlflow_store.lock")
+    db = launch_dir / "mlflow.db"
+    artifacts = under_launch(tracking.get("artifact_dir"), "mlartifacts")
+    return StoreLocation(f"sqlite:///{db}", artifacts.as_uri(), checkpoint_root, launch_dir / "mlflow.db.lock")
+
+
+def _is_transient(error: Exception) -> bool:
+    text = str(error).lower()
+    return "database is locked" in text or "database is busy" in text or "unable to open database" in text
+
+
+def retry(call: Callable[..., T], *args: Any, attempts: int = 12, **kwargs: Any) -> T:
+    """Run one store call, retrying with backoff while SQLite is locked by another writer."""
+    for attempt in range(attempts):
+        try:
+            return call(*args, **kwargs)
+        except Exception as error:  # MlflowException or sqlalchemy's OperationalError
+            if attempt == attempts - 1 or not _is_transient(error):
+                raise
+            time.sleep(min(0.2 * 2**attempt, 5.0))
+    raise AssertionError("unreachable")
+
+
+def git_info(repo_root: Path = PACKAGE_ROOT.parent) -> tuple[str, str]:
+    """(commit, dirty) of the code that runs; ('unknown', 'unknown') outside a checkout."""
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", "-C", str(repo_root), *args], capture_output=True, text=True, check=True, timeout=20
+        ).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = "true" if git("status", "--porcelain", "--untracked-files=no") else "false"
+        return commit, dirty
+    except (OSError, subprocess.SubprocessError):
+        return "unknown", "unknown"
+
+
+def flatten(node: Mapping[str, Any] | DictConfig, prefix: str = "") -> dict[str, str]:
+    """`{'a': {'b': 1}}` -> `{'a.b': '1'}`, values cut to MLflow's param length."""
+    if isinstance(node, DictConfig):
+        node = OmegaConf.to_container(node, resolve=True)
+    flat: dict[str, str] = {}
+    for key, value in node.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping) and value:
+            flat.update(flatten(value, name + "."))
+        else:
+            flat[name] = str(value)[:MAX_PARAM_VALUE]
+    return flat
+
+
+def _chunks(items: list[T], size: int) -> Iterable[list[T]]:
+    for start in range(0, len(items), size):
+        yield items[start : start + size]
+
+
+class Tracker:
+    """One experiment in one store; all writes retried and shielded from SIGTERM mid-write."""
+
+    def __init__(self, location: StoreLocation, experiment_name: str) -> None:
+        from mlflow.tracking import MlflowClient
+
+        self.location = location
+        # Creating a SQLite store runs its schema migrations: two processes doing that at
+        # once corrupt it, so the first touch of the store and the experiment is locked.
+        location.lock_path.parent.mkdir(parents=True, exist_ok=True)
+        with FileLock(str(location.lock_path)):
+            self.client = MlflowClient(tracking_uri=location.tracking_uri)
+            self.experiment_id = retry(self._get_or_create_experiment, experiment_name)
+
+    def _get_or_create_experiment(self, name: str) -> str:
+        found = self.client.get_experiment_by_name(name)
+        if found is not None:
+            if found.lifecycle_stage == "deleted":
+                self.client.restore_experiment(found.experiment_id)
+            return found.experiment_id
+        try:
+            return self.client.create_experiment(name, artifact_location=self.location.artifact_location)
+        except Exception:
+            # Another machine of the sweep created it first (our file lock is per machine).
+            found = self.client.get_experiment_by_name(name)
+            if found is None:
+                raise
+            return found.experiment_id
+
+    def _write(self, call: Callable[..., T], *args: Any, **kwargs: Any) -> T:
+        with protected():
+            return retry(call, *args, **kwargs)
+
+    def start_run(self, name: str, tags: Mapping[str, str], parent_run_id: str | None = None) -> str:
+        tags = {k: str(v) for k, v in tags.items()}
+        tags["host"], tags["pid"] = socket.gethostname(), str(os.getpid())
+        if parent_run_id:
+            tags["mlflow.parentRunId"] = parent_run_id
+        run = self._write(self.client.create_run, self.experiment_id, tags=tags, run_name=name)
+        return run.info.run_id
+
+    def reopen(self, run_id: str) -> None:
+        """Mark an earlier, unfinished run RUNNING again under this process (resume)."""
+        self._write(self.client.update_run, run_id, status="RUNNING")
+        self.set_tags(run_id, {"host": socket.gethostname(), "pid": str(os.getpid())})
+
+    def end(self, run_id: str, status: str = "FINISHED") -> None:
+        self._write(self.client.set_terminated, run_id, status=status)
+
+    def set_tags(self, run_id: str, tags: Mapping[str, Any]) -> None:
+        from mlflow.entities import RunTag
+
+        self._write(self.client.log_batch, run_id, tags=[RunTag(k, str(v)) for k, v in tags.items()])
+
+    def log_params(self, run_id: str, params: Mapping[str, str]) -> None:
+        from mlflow.entities import Param
+
+        items = [Param(k, v) for k, v in params.items()]
+        for chunk in _chunks(items, PARAMS_PER_BATCH):
+            self._write(self.client.log_batch, run_id, params=chunk)
+
+    def log_metrics(self, run_id: str, metrics: Mapping[str, float], step: int) -> None:
+        from mlflow.entities import Metric
+
+        now = int(time.time() * 1000)
+        items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items()]
+        for chunk in _chunks(items, METRICS_PER_BATCH):
+            self._write(self.client.log_batch, run_id, metrics=chunk)
+
+    def log_artifact(self, run_id: str, path: Path, artifact_path: str | None = None) -> None:
+        self._write(self.client.log_artifact, run_id, str(path), artifact_path)
+
+    def log_text(self, run_id: str, text: str, artifact_file: str) -> None:
+        self._write(self.client.log_text, run_id, text, artifact_file)
+
+    def get_run(self, run_id: str) -> Any | None:
+        try:
+            return retry(self.client.get_run, run_id)
+        except Exception as error:  # deleted store, or a run id from another store
+            log.debug("run %s not found: %s", run_id, error)
+            return None
+
+    def search(self, filter_string: str, max_results: int = 1000) -> list[Any]:
+        return retry(
+            self.client.search_runs, [self.experiment_id], filter_string=filter_string,
+            max_results=max_results, order_by=["attributes.start_time DESC"],
+        )
+
+    def finished_trainings(self, train_key: str) -> list[Any]:
+        """FINISHED training runs for this key, newest first."""
+        return self.search(
+            f"tags.stage = 'train' and tags.train_key = '{train_key}' and attributes.status = 'FINISHED'"
+        )
+
+    def mark_orphans_killed(self, train_key: str) -> list[str]:
+        """Runs of this key left RUNNING by a process on this host that no longer exists.
+
+        A SIGKILLed job cannot close its run; the next job with the same key closes it as
+        KILLED so that the store says what happened (a resumed training reopens it).
+        """
+        host, closed = socket.gethostname(), []
+        for run in self.search(f"tags.train_key = '{train_key}' and attributes.status = 'RUNNING'"):
+            tags = run.data.tags
+            if tags.get("host") == host and tags.get("pid", "").isdigit() and not _alive(int(tags["pid"])):
+                self.end(run.info.run_id, "KILLED")
+                closed.append(run.info.run_id)
+        return closed
+
+    def download(self, run_id: str, artifact_path: str, dst: Path) -> Path:
+        dst.mkdir(parents=True, exist_ok=True)
+        return Path(retry(self.client.download_artifacts, run_id, artifact_path, str(dst)))
+
+
+def _alive(pid: int) -> bool:
+    if pid == os.getpid():
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # exists, owned by someone else
+        return True
+    return True
+
+
+class SweepTracking(Callback):
+    """Hydra callback: one MLflow parent run per sweep, created before any job starts.
+
+    Creating the store and the experiment here, in the launching process, means parallel
+    jobs only ever open an existing store. Jobs find the parent run through an environment
+    variable, which joblib's and submitit's workers inherit.
+    """
+
+    def __init__(self) -> None:
+        self._tracker: Tracker | None = None
+        self._parent: str | None = None
+
+    def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
+        from .schema import validate
+
+        # Values not swept over are the same in every job: a bad one stops the sweep here,
+        # before the store or any job is touched. Swept values are checked by each job.
+        # Hydra turns a callback's exception into a warning, so stop with SystemExit instead.
+        from .simulator.config import ConfigError
+
+        try:
+            validate(OmegaConf.masked_copy(config, [k for k in config if k != "hydra"]))
+        except ConfigError as error:
+            print(f"hgm_repro: {error}\nnothing was launched.", file=sys.stderr)
+            raise SystemExit(1) from error
+        tracker = self._open(config)
+        if tracker is None:
+            return
+        sweep_dir = str(config.hydra.sweep.dir)
+        commit, dirty = git_info()
+        overrides = " ".join(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))
+        self._parent = tracker.start_run(
+            f"sweep-{Path(sweep_dir).name}",
+            # No `stage` tag: analysis reads only train and eval runs, the parent only groups them.
+            {"sweep": "true", "sweep_dir": str(Path(sweep_dir).resolve()), "overrides": overrides[:5000],
+             "git_commit": commit, "git_dirty": dirty},
+        )
+        os.environ[PARENT_RUN_ENV] = self._parent
+        # A sweep that raises never reaches on_multirun_end: close the parent run anyway.
+        atexit.register(self._close, "FAILED")
+        log.info("MLflow parent run %s (%s)", self._parent, tracker.location.tracking_uri)
+
+    def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        self._close("FINISHED")
+        atexit.unregister(self._close)
+
+    def _open(self, config: DictConfig) -> Tracker | None:
+        try:
+            # HydraConfig is not set up yet in on_multirun_start: read the launch dir from the config.
+            location = resolve_location(config.tracking, Path(config.hydra.runtime.cwd))
+            self._tracker = Tracker(location, str(config.tracking.experiment_name))
+        except Exception as error:  # the job reports a bad tracking config with context
+            log.warning("tracking store not prepared before the jobs: %s", error)
+            self._tracker = None
+        return self._tracker
+
+    def _close(self, status: str) -> None:
+        if self._tracker is not None and self._parent is not None:
+            self._tracker.end(self._parent, status)
+            os.environ.pop(PARENT_RUN_ENV, None)
+            self._parent = None

@@ -1,0 +1,55 @@
+"""`train_key`: a short hash of everything that decides what training produces.
+
+Two jobs with the same key would train the same network on the same data with the same
+seed, so the second one reuses the first one's checkpoint (train once, evaluate many).
+The test scenario, tracking, launcher and device are deliberately left out: they change
+where a job evaluates or how fast it runs, not what it learns.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping
+from typing import Any
+
+from omegaconf import DictConfig, OmegaConf
+
+from .checkpoint import NON_TRAINING_LEARNER_KEYS
+
+# Bump when the checkpoint format or the meaning of a training config changes, so that
+# old checkpoints are not silently reused by new code.
+TRAIN_KEY_VERSION = 1
+KEY_LENGTH = 12
+
+# Learner values that only affect evaluation or bookkeeping, not the trained weights.
+# `compile` and `cuda_graph` are execution strategies like `device`. Kept in step with what a
+# checkpoint itself ignores, so that a reused checkpoint is never refused by the learner.
+LEARNER_KEYS_NOT_IN_KEY = frozenset(
+    {"test_steps", "test_envs", "log_every", "checkpoint_every", "compile", "cuda_graph",
+     *NON_TRAINING_LEARNER_KEYS}
+)
+# Model values that name or describe the model without changing its training.
+MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
+
+
+def training_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
+    """The part of the root config that training depends on, as plain resolved data."""
+    root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+    model = root["model"]
+    learner = {k: v for k, v in root["learner"].items() if k not in LEARNER_KEYS_NOT_IN_KEY}
+    return {
+        "version": TRAIN_KEY_VERSION,
+        "model": {k: model[k] for k in MODEL_KEYS_IN_KEY if k in model},
+        "observation": root["observation"],
+        "learner": learner,
+        "simulator": root["simulator"],
+        "train_scenario": root["train_scenario"],
+        "seed": root["seed"],
+    }
+
+
+def train_key(cfg: DictConfig | Mapping[str, Any]) -> str:
+    """A short hex digest of `training_config(cfg)`; stable across runs and machines."""
+    payload = json.dumps(training_config(cfg), sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(payload.encode()).hexdigest()[:KEY_LENGTH]

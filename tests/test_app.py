@@ -1,0 +1,108 @@
+"""The command line: help, printed config, and bad values that stop before any work (subprocesses)."""
+
+from __future__ import annotations
+
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+import yaml
+
+from hgm_repro import CONF_DIR
+from hgm_repro.__main__ import quote_numeric_choices
+
+REPO_ROOT = CONF_DIR.parent
+
+
+def hgm(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
+    return subprocess.run([sys.executable, "-m", "hgm_repro", *args], cwd=tmp_path, env=env,
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
+    out = hgm(tmp_path, "--help")
+    assert out.returncode == 0, out.stderr
+    for line in ("experiment: paper, quick, smoke", "launcher: basic, joblib", "learner: dqn",
+                 "model: coordinate, human, idm_mobil, min, proposed, random", "scenario: 1, 2, 3, 4, 5, train",
+                 "simulator: highway", "tracking: sqlite"):
+        assert line in out.stdout
+    for example in ("-m scenario=1,2,3,4,5 model=proposed,min,coordinate", "seed=0,1,2", "experiment=paper",
+                    "device=cuda", "tracking.uri=http://", "hydra/launcher=joblib", "mlflow ui"):
+        assert example in out.stdout, example
+
+
+def test_cfg_job_prints_the_composed_config(tmp_path: Path) -> None:
+    out = hgm(tmp_path, "--cfg", "job", "experiment=smoke", "scenario=3", "model=min", "seed=2")
+    assert out.returncode == 0, out.stderr
+    cfg = yaml.safe_load(out.stdout)
+    assert cfg["scenario"]["name"] == "3" and cfg["model"]["name"] == "min" and cfg["seed"] == 2
+    assert cfg["learner"]["total_steps"] == 256 and cfg["train_scenario"]["name"] == "train"
+    assert "hydra" not in cfg
+    assert list(tmp_path.iterdir()) == []  # printing the config runs nothing
+
+
+def test_numeric_group_choices_are_quoted_for_hydra() -> None:
+    assert quote_numeric_choices(["scenario=3", "scenario=1,2,3", "seed=0,1", "learner.lr=1"]) == [
+        "scenario='3'", "scenario='1','2','3'", "seed=0,1", "learner.lr=1"]
+    assert quote_numeric_choices(["scenario@train_scenario=5", "+scenario=2"]) == [
+        "scenario@train_scenario='5'", "+scenario='2'"]
+
+
+@pytest.mark.parametrize(
+    ("override", "expected"),
+    [
+        ("scenario=7", ["Could not find 'scenario/7'", "Available options in 'scenario'", "train"]),
+        ("model=nope", ["Could not find 'model/nope'", "proposed", "idm_mobil"]),
+        ("experiment=nope", ["Could not find 'experiment/nope'", "smoke", "paper"]),
+        ("learner.lr=-1", ["learner.lr=-1 is not allowed: must be > 0"]),
+        ("learner.batch_size=abc", ["learner.batch_size='abc' is not allowed: expected an integer"]),
+        ("seed=-3", ["seed=-3 is not allowed"]),
+        ("device=tpu", ["device='tpu' is not allowed"]),
+        ("simulator.lanes=0", ["simulator.lanes=0 is not allowed"]),
+    ],
+)
+def test_bad_value_stops_before_any_work(tmp_path: Path, override: str, expected: list[str]) -> None:
+    out = hgm(tmp_path, "experiment=smoke", override)
+    assert out.returncode != 0
+    for text in expected:
+        assert text in out.stderr + out.stdout, (text, out.stderr[-2000:])
+    # No store, no checkpoint: validation runs before the job opens anything.
+    assert not (tmp_path / "mlflow.db").exists() and not (tmp_path / "checkpoints").exists()
+
+
+def test_bad_value_in_a_sweep_launches_nothing(tmp_path: Path) -> None:
+    out = hgm(tmp_path, "-m", "experiment=smoke", "learner.lr=-1", "seed=0,1")
+    assert out.returncode != 0
+    assert "learner.lr=-1 is not allowed" in out.stderr and "nothing was launched" in out.stderr
+    assert "Launching" not in out.stdout + out.stderr and not (tmp_path / "mlflow.db").exists()
+
+
+def test_launcher_presets_compose(tmp_path: Path) -> None:
+    out = hgm(tmp_path, "launcher=joblib", "--cfg", "hydra")
+    assert out.returncode == 0, out.stderr
+    launcher = yaml.safe_load(out.stdout)["hydra"]["launcher"]
+    assert launcher["_target_"].endswith("JoblibLauncher") and launcher["n_jobs"] == 2
+
+
+@pytest.mark.parametrize(("preset", "plugin", "target"), [
+    ("slurm", "hydra_plugins.hydra_submitit_launcher", "submitit_slurm"),
+    ("ray", "hydra_plugins.hydra_ray_launcher", "ray"),
+])
+def test_cluster_launcher_presets(tmp_path: Path, preset: str, plugin: str, target: str) -> None:
+    text = (CONF_DIR / "launcher" / f"{preset}.yaml").read_text()
+    assert text.startswith("# @package _global_")
+    node = yaml.safe_load(text)
+    assert node["defaults"] == [{"override /hydra/launcher": target}]
+    try:
+        found = importlib.util.find_spec(plugin) is not None
+    except ModuleNotFoundError:
+        found = False
+    if not found:
+        pytest.skip(f"{plugin} is not installed (pip install '.[{preset}]')")
+    out = hgm(tmp_path, f"launcher={preset}", "--cfg", "hydra")
+    assert out.returncode == 0, out.stderr
+    assert yaml.safe_load(out.stdout)["hydra"]["launcher"]["_target_"].startswith("hydra_plugins")

@@ -1,0 +1,165 @@
+"""The Dueling DQN + PER learner: end to end on the smoke preset, checkpoints, resume, refusals."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+import torch
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
+
+from hgm_repro import CONF_DIR
+from hgm_repro.checkpoint import CheckpointMismatchError, load_checkpoint
+from hgm_repro.learner import NonFiniteLossError, train
+from hgm_repro.learner import dqn as dqn_module
+from hgm_repro.learner.priority_trees import MinTree, SumTree
+
+# Tiny on top of the smoke preset, so that every test trains in a few seconds. The observation
+# sizes repeat smoke.yaml's: they make the test independent of how the root config orders presets.
+TINY = ["experiment=smoke", "observation.height=36", "observation.width=36", "observation.frame_stack=2",
+        "learner.n_envs=4", "learner.batch_size=8", "learner.warmup_steps=32",
+        "learner.total_steps=128", "learner.eps_steps=128", "learner.checkpoint_every=64", "learner.log_every=32",
+        "learner.target_update_steps=32", "learner.test_steps=48", "learner.test_envs=4", "learner.torch_threads=1"]
+
+
+def compose_cfg(*overrides: str) -> DictConfig:
+    """TINY plus `overrides`; learned models also get small dense layers (the conv stack stays Table 3's)."""
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("config", overrides=[*TINY, *overrides])
+        if cfg.model.learned:
+            cfg = compose("config", overrides=[*TINY, "model.network.hidden=[32,32]", *overrides])
+        return cfg
+
+
+class Recorder:
+    """A `log` callable that keeps what it was given."""
+
+    def __init__(self, stop_at: int | None = None):
+        self.calls: list[tuple[int, dict[str, float]]] = []
+        self.stop_at = stop_at
+
+    def __call__(self, metrics: dict[str, float], step: int) -> None:
+        self.calls.append((step, dict(metrics)))
+        if self.stop_at is not None and step >= self.stop_at:
+            raise KeyboardInterrupt("simulated kill")
+
+    def steps(self, key: str) -> list[int]:
+        return [s for s, m in self.calls if key in m]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory) -> tuple[DictConfig, Path, Recorder]:
+    cfg = compose_cfg()
+    log = Recorder()
+    final = train(cfg, tmp_path_factory.mktemp("smoke"), log)
+    return cfg, final, log
+
+
+def test_smoke_training_runs_end_to_end_and_writes_checkpoints(trained):
+    cfg, final, log = trained
+    assert final.name == "final.pt" and final.exists() and (final.parent / "last.pt").exists()
+    state = load_checkpoint(final, cfg)
+    assert state["finished"] and state["env_steps"] == 128
+    assert state["updates"] == (128 - 32) // 4 + 1  # one update per 4 steps once 32 are stored
+    assert state["epsilon"] == pytest.approx(cfg.learner.eps_end)
+    assert state["beta"] == pytest.approx(1.0)
+    assert {"network", "loss", "optimizer", "rng", "training_config", "replay_buffer"} <= set(state)
+
+
+def test_training_logs_parameter_counts_and_curves(trained):
+    _, _, log = trained
+    step, params = log.calls[0]
+    assert step == 0 and params["params/total"] > 0
+    for key in ("train/loss", "train/epsilon", "train/beta", "train/steps_per_s", "train/avg_speed_kmh",
+                "train/lane_changes", "train/overtakes", "train/episode_return", "train/collisions"):
+        assert log.steps(key), f"{key} never logged"
+    assert log.steps("train/epsilon") == [32, 64, 96, 128]
+    epsilons = [m["train/epsilon"] for _, m in log.calls if "train/epsilon" in m]
+    assert epsilons == sorted(epsilons, reverse=True) and epsilons[0] < 1.0
+
+
+def test_finished_run_returns_its_final_checkpoint(trained):
+    cfg, final, _ = trained
+    log = Recorder()
+    assert train(cfg, final.parent, log) == final
+    assert log.calls == []  # nothing trained again
+
+
+def test_killed_run_resumes_from_last_and_stops_at_the_same_step(tmp_path):
+    cfg = compose_cfg()
+    with pytest.raises(KeyboardInterrupt):
+        train(cfg, tmp_path, Recorder(stop_at=96))  # killed after the step-64 checkpoint
+    assert not (tmp_path / "final.pt").exists()
+    last = load_checkpoint(tmp_path / "last.pt", cfg)
+    assert last["env_steps"] == 64 and not last["finished"]
+
+    log = Recorder()
+    final = train(cfg, tmp_path, log)
+    state = load_checkpoint(final, cfg)
+    assert state["env_steps"] == 128 and state["finished"]
+    assert log.steps("train/epsilon") == [96, 128]  # continued from 64, did not start over
+    # Epsilon continued its schedule instead of restarting at eps_start.
+    assert log.calls[1][1]["train/epsilon"] < last["epsilon"]
+    assert state["updates"] > last["updates"]
+
+
+def test_checkpoint_from_another_model_is_refused(trained, tmp_path):
+    _, final, _ = trained
+    other = compose_cfg("model=min")
+    with pytest.raises(CheckpointMismatchError, match=r"'proposed'.*'min'"):
+        train(other, final.parent, Recorder())
+    with pytest.raises(CheckpointMismatchError, match="learner.lr"):
+        train(compose_cfg("learner.lr=0.1"), final.parent, Recorder())
+
+
+def test_nan_loss_stops_the_run_and_keeps_checkpoints(tmp_path, monkeypatch):
+    real = dqn_module.make_update
+
+    def poisoned(*args, **kwargs):
+        update = real(*args, **kwargs)
+
+        def nan_update(batch):
+            out = update(batch)
+            out["loss"] = torch.tensor(float("nan"))
+            return out
+
+        return nan_update
+
+    monkeypatch.setattr(dqn_module, "make_update", poisoned)
+    cfg = compose_cfg("learner.checkpoint_every=16")
+    log = Recorder()
+    with pytest.raises(NonFiniteLossError, match="env step 32"):
+        train(cfg, tmp_path, log)
+    assert load_checkpoint(tmp_path / "last.pt", cfg)["env_steps"] == 16  # the last good one stays
+    assert log.steps("params/total") == [0]
+
+
+def test_priority_trees_sample_in_proportion():
+    sums, mins = SumTree(8), MinTree(8)
+    values = torch.tensor([0.0, 1.0, 0.0, 3.0, 0.0, 0.0, 0.0, 4.0])
+    sums[torch.arange(8)] = values
+    mins[torch.arange(8)] = torch.where(values > 0, values, torch.tensor(float("inf")))
+    assert sums.query(0, 8) == 8.0 and mins.query(0, 8) == 1.0
+    index = sums.scan_lower_bound(torch.tensor([0.0, 0.99, 1.0, 3.9, 4.0, 7.99]))
+    assert index.tolist() == [1, 1, 3, 3, 7, 7]  # never a zero-priority slot
+
+
+def test_cuda_graph_is_ignored_with_a_warning_on_cpu():
+    from hgm_repro.learner.builders import make_actor, make_loss, make_network, make_update
+
+    cfg = compose_cfg("learner.cuda_graph=true")
+    loss = make_loss(cfg, make_actor(make_network(cfg)))
+    optimizer = torch.optim.Adam(loss.parameters(), lr=1e-3)
+    with pytest.warns(UserWarning, match="cuda_graph"):
+        update = make_update(cfg, loss, optimizer, torch.device("cpu"))
+    assert callable(update)
+
+
+@pytest.mark.cuda
+@pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
+@pytest.mark.parametrize("options", [[], ["learner.cuda_graph=true"], ["learner.compile=true"]])
+def test_smoke_training_on_cuda(tmp_path, options):
+    cfg = compose_cfg("device=cuda", *options)
+    state = load_checkpoint(train(cfg, tmp_path, Recorder()), cfg)
+    assert state["env_steps"] == 128 and state["finished"]

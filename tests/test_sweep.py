@@ -1,0 +1,136 @@
+"""Sweeps end to end (subprocesses, smoke preset): train once per key, evaluate every job,
+parallel jobs that share a key, and a training killed mid-way that resumes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from hgm_repro import CONF_DIR
+
+REPO_ROOT = CONF_DIR.parent
+JOB_TAGS = ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty")
+EVAL_METRICS = ("eval/avg_speed_kmh", "eval/lane_changes", "eval/overtakes", "eval/collisions",
+                "eval/dangerous_actions", "eval/episode_return")
+
+
+def command(*args: str) -> list[str]:
+    return [sys.executable, "-m", "hgm_repro", *args]
+
+
+def environment() -> dict[str, str]:
+    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
+
+
+def hgm(cwd: Path, *args: str, timeout: float = 900) -> subprocess.CompletedProcess[str]:
+    out = subprocess.run(command(*args), cwd=cwd, env=environment(), capture_output=True, text=True,
+                         timeout=timeout)
+    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-5000:]
+    return out
+
+
+def store_runs(launch: Path) -> list:
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(tracking_uri=f"sqlite:///{launch.resolve()}/mlflow.db")
+    experiment = client.get_experiment_by_name("hgm_repro")
+    return client.search_runs([experiment.experiment_id], max_results=1000)
+
+
+def by_stage(runs: list, stage: str) -> list:
+    return [r for r in runs if r.data.tags.get("stage") == stage]
+
+
+def check_sweep(launch: Path, trainings: int, evaluations: int) -> list:
+    from mlflow.tracking import MlflowClient
+
+    runs = store_runs(launch)
+    train, evals = by_stage(runs, "train"), by_stage(runs, "eval")
+    parents = [r for r in runs if r.data.tags.get("sweep") == "true"]
+    assert len(train) == trainings and len(evals) == evaluations and len(parents) == 1
+    assert {r.info.status for r in runs} == {"FINISHED"}
+    # One parent run groups the sweep's runs in the MLflow UI.
+    assert {r.data.tags["mlflow.parentRunId"] for r in train + evals} == {parents[0].info.run_id}
+    assert len({r.data.tags["train_key"] for r in train}) == trainings
+    # Every evaluation of a learned model used a training of its key; exactly one per key trained.
+    keys = {r.data.tags["train_key"]: r.info.run_id for r in train}
+    learned = [r for r in evals if r.data.tags["training"] != "none"]
+    assert all(keys[r.data.tags["train_key"]] == r.data.tags["train_run_id"] for r in learned)
+    assert sum(r.data.tags["training"] == "trained" for r in learned) == trainings
+    client = MlflowClient(tracking_uri=f"sqlite:///{launch.resolve()}/mlflow.db")
+    for run in train + evals:
+        for tag in JOB_TAGS:
+            assert tag in run.data.tags, (tag, run.data.tags)
+        assert run.data.tags["git_commit"] != ""
+        assert "learner.lr" in run.data.params and "seed" in run.data.params
+    for run in train:
+        assert run.data.tags["scenario"] == "train"
+        assert any(k.startswith("train/") for k in run.data.metrics), run.data.metrics
+        assert any(k.startswith("params/") for k in run.data.metrics)
+        names = {a.path for a in client.list_artifacts(run.info.run_id)}
+        assert "config.yaml" in names
+        assert [a.path for a in client.list_artifacts(run.info.run_id, "checkpoint")] == ["checkpoint/final.pt"]
+    for run in evals:
+        for metric in EVAL_METRICS:
+            assert metric in run.data.metrics, (metric, run.data.metrics)
+        names = {a.path for a in client.list_artifacts(run.info.run_id)}
+        assert {"config.yaml", "episodes.csv"} <= names
+        assert "episode.gif" in names or run.data.tags.get("gif", "").startswith("skipped")
+    return runs
+
+
+def test_small_parallel_sweep_trains_each_key_once(tmp_path: Path) -> None:
+    """Two jobs with the same key run at once: one trains, the other waits and reuses it."""
+    hgm(tmp_path, "-m", "experiment=smoke", "model=proposed,human", "scenario=1,5",
+        "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
+    runs = check_sweep(tmp_path, trainings=1, evaluations=4)
+    assert sorted(r.data.tags["training"] for r in by_stage(runs, "eval")) == ["none", "none", "reused", "trained"]
+    # A second launch finds every training finished: it only evaluates.
+    hgm(tmp_path, "experiment=smoke", "model=proposed", "scenario=3")
+    assert len(by_stage(store_runs(tmp_path), "train")) == 1
+
+
+def test_smoke_grid_2_models_2_scenarios_2_seeds(tmp_path: Path) -> None:
+    hgm(tmp_path, "-m", "experiment=smoke", "model=proposed,min", "scenario=1,5", "seed=0,1",
+        "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
+    runs = check_sweep(tmp_path, trainings=4, evaluations=8)
+    evals = by_stage(runs, "eval")
+    assert sorted((r.data.tags["model"], r.data.tags["scenario"], r.data.tags["seed"]) for r in evals) == sorted(
+        (m, s, seed) for m in ("proposed", "min") for s in ("1", "5") for seed in ("0", "1"))
+
+
+# A training long enough to be caught mid-way: smoke sizes, more steps, frequent checkpoints.
+# The job is stopped as soon as its first last.pt (step 64) appears.
+LONGER = ("experiment=smoke", "learner.total_steps=256", "learner.checkpoint_every=64", "tracking.log_gif=false")
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
+def test_killed_training_resumes_into_one_finished_run(tmp_path: Path, sig: signal.Signals) -> None:
+    job = subprocess.Popen(command(*LONGER), cwd=tmp_path, env=environment(),
+                           stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + 300
+    while not list((tmp_path / "checkpoints").glob("*/last.pt")):
+        assert job.poll() is None, job.stdout.read()[-3000:]
+        assert time.monotonic() < deadline, "no checkpoint written in time"
+        time.sleep(0.5)
+    job.send_signal(sig)
+    output, _ = job.communicate(timeout=120)
+    assert job.returncode == (128 + signal.SIGTERM if sig == signal.SIGTERM else -signal.SIGKILL), output[-3000:]
+    (stopped,) = by_stage(store_runs(tmp_path), "train")
+    # SIGTERM: the job closes its run itself. SIGKILL: nobody can, until the next job does.
+    assert stopped.info.status == ("KILLED" if sig == signal.SIGTERM else "RUNNING")
+
+    out = hgm(tmp_path, *LONGER)
+    assert "training=resumed" in out.stdout + out.stderr
+    runs = store_runs(tmp_path)
+    (train,) = by_stage(runs, "train")
+    assert train.info.run_id == stopped.info.run_id and train.info.status == "FINISHED"
+    assert train.data.tags["resumes"] == "1"
+    (evaluation,) = by_stage(runs, "eval")
+    assert evaluation.info.status == "FINISHED" and evaluation.data.tags["train_run_id"] == train.info.run_id

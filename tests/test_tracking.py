@@ -1,0 +1,205 @@
+"""Tracking and train-once logic, in process, with a fake learner and evaluator (seconds, no torch)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+from pathlib import Path
+from types import SimpleNamespace
+
+import pandas as pd
+import pytest
+from hydra import compose, initialize_config_dir
+from omegaconf import DictConfig
+
+from hgm_repro import CONF_DIR
+from hgm_repro.app import RUN_ID_FILE, run_job
+from hgm_repro.interrupts import JobInterrupted
+from hgm_repro.tracking import Tracker, flatten, git_info, resolve_location, retry
+from hgm_repro.train_key import train_key
+
+
+def make_cfg(*overrides: str) -> DictConfig:
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        return compose("config", overrides=["experiment=smoke", "tracking.log_gif=false", *overrides])
+
+
+@pytest.fixture(scope="module")
+def empty_store(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """An initialised SQLite store, made once: creating one runs MLflow's migrations (seconds)."""
+    launch = tmp_path_factory.mktemp("template")
+    Tracker(resolve_location(make_cfg().tracking, launch), "hgm_repro")
+    return launch / "mlflow.db"
+
+
+@pytest.fixture
+def launch(tmp_path: Path, empty_store: Path) -> Path:
+    """A launch dir holding a copy of the empty store (artifacts still land in the template's
+    dir, which its experiment names; unique run ids keep them apart)."""
+    shutil.copy(empty_store, tmp_path / "mlflow.db")
+    return tmp_path
+
+
+class FakeLearner:
+    """Writes last.pt and final.pt like the learner; can stop once, mid-way, like a SIGTERM."""
+
+    def __init__(self, interrupt_after: int | None = None) -> None:
+        self.calls: list[Path] = []
+        self.interrupt_after = interrupt_after
+
+    def __call__(self, cfg: DictConfig, checkpoint_dir: Path, log) -> Path:
+        self.calls.append(checkpoint_dir)
+        last = checkpoint_dir / "last.pt"
+        start = int(last.read_text()) if last.exists() else 0
+        for step in range(start + 64, int(cfg.learner.total_steps) + 1, 64):
+            log({"train/loss": 1.0 / step, "train/episode_return": float(step)}, step)
+            last.write_text(str(step))
+            if self.interrupt_after is not None and step >= self.interrupt_after:
+                self.interrupt_after = None
+                raise JobInterrupted()
+        final = checkpoint_dir / "final.pt"
+        final.write_text("weights")
+        return final
+
+
+def fake_evaluate(cfg: DictConfig, scenario, checkpoint: Path | None) -> SimpleNamespace:
+    episodes = pd.DataFrame({"avg_speed_kmh": [60.0, 62.0], "episode_return": [10.0, 12.0]})
+    return SimpleNamespace(episodes=episodes, means={"eval/avg_speed_kmh": 61.0, "eval/episode_return": 11.0})
+
+
+def store(tmp_path: Path) -> Tracker:
+    return Tracker(resolve_location(make_cfg().tracking, tmp_path), "hgm_repro")
+
+
+def runs(tmp_path: Path, stage: str) -> list:
+    return store(tmp_path).search(f"tags.stage = '{stage}'")
+
+
+def test_train_key_ignores_test_scenario_tracking_and_device() -> None:
+    base = train_key(make_cfg())
+    assert base == train_key(make_cfg("scenario='3'", "device=mps", "tracking.uri=http://x", "launcher=joblib"))
+    assert base == train_key(make_cfg("learner.test_steps=999", "learner.log_every=7"))
+    assert base != train_key(make_cfg("seed=1"))
+    assert base != train_key(make_cfg("model=min"))
+    assert base != train_key(make_cfg("learner.lr=0.001"))
+    assert base != train_key(make_cfg("scenario@train_scenario='5'"))
+    assert len(base) == 12 and int(base, 16) >= 0
+
+
+def test_flatten_cuts_values_and_nests_keys() -> None:
+    flat = flatten({"a": {"b": 1, "c": {"d": "x" * 900}}, "e": [1, 2], "f": {}})
+    assert flat == {"a.b": "1", "a.c.d": "x" * 500, "e": "[1, 2]", "f": "{}"}
+
+
+def test_retry_waits_out_a_locked_database() -> None:
+    calls = []
+
+    def flaky() -> str:
+        calls.append(1)
+        if len(calls) < 3:
+            raise RuntimeError("(sqlite3.OperationalError) database is locked")
+        return "ok"
+
+    assert retry(flaky) == "ok" and len(calls) == 3
+    with pytest.raises(ValueError):
+        retry(lambda: (_ for _ in ()).throw(ValueError("not transient")))
+
+
+def test_git_info_outside_a_checkout(tmp_path: Path) -> None:
+    assert git_info(tmp_path) == ("unknown", "unknown")
+
+
+def test_store_is_absolute_under_the_launch_dir(tmp_path: Path) -> None:
+    loc = resolve_location(make_cfg().tracking, tmp_path)
+    assert loc.tracking_uri == f"sqlite:///{tmp_path.resolve()}/mlflow.db"
+    assert loc.artifact_location == (tmp_path.resolve() / "mlartifacts").as_uri()
+    assert loc.checkpoint_root == tmp_path.resolve() / "checkpoints"
+    remote = resolve_location(make_cfg("tracking.uri=http://127.0.0.1:5999").tracking, tmp_path)
+    assert remote.tracking_uri == "http://127.0.0.1:5999" and remote.artifact_location is None
+    assert remote.checkpoint_root == tmp_path.resolve() / "checkpoints"
+
+
+def test_params_beyond_one_batch_are_all_logged(launch: Path) -> None:
+    tracker = store(launch)
+    run_id = tracker.start_run("many", {"stage": "eval"})
+    tracker.log_params(run_id, {f"p{i}": str(i) for i in range(250)})
+    assert len(tracker.get_run(run_id).data.params) == 250
+
+
+def test_train_once_evaluate_many(launch: Path) -> None:
+    learner = FakeLearner()
+    outcomes = [
+        run_job(make_cfg(f"scenario='{s}'"), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+        for s in ("1", "5", "3")
+    ]
+    assert len(learner.calls) == 1
+    assert [o.training.how for o in outcomes] == ["trained", "reused", "reused"]
+    train_runs, eval_runs = runs(launch, "train"), runs(launch, "eval")
+    assert len(train_runs) == 1 and len(eval_runs) == 3
+    train = train_runs[0]
+    assert train.info.status == "FINISHED" and train.data.tags["scenario"] == "train"
+    assert train.data.metrics["train/loss"] == pytest.approx(1 / 256)
+    assert {e.data.tags["train_run_id"] for e in eval_runs} == {train.info.run_id}
+    for run in [*train_runs, *eval_runs]:
+        for tag in ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty"):
+            assert tag in run.data.tags, tag
+    assert sorted(e.data.tags["scenario"] for e in eval_runs) == ["1", "3", "5"]
+    assert eval_runs[0].data.metrics["eval/avg_speed_kmh"] == 61.0
+    assert eval_runs[0].data.params["learner.total_steps"] == "256"
+    client = store(launch).client
+    assert {a.path for a in client.list_artifacts(eval_runs[0].info.run_id)} >= {"config.yaml", "episodes.csv"}
+    assert [a.path for a in client.list_artifacts(train.info.run_id, "checkpoint")] == ["checkpoint/final.pt"]
+
+
+def test_force_retrain_trains_again(launch: Path) -> None:
+    learner = FakeLearner()
+    run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    outcome = run_job(make_cfg("force_retrain=true"), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert outcome.training.how == "trained" and len(learner.calls) == 2
+    assert len(runs(launch, "train")) == 2
+
+
+def test_interrupted_training_resumes_the_same_run(launch: Path) -> None:
+    learner = FakeLearner(interrupt_after=128)
+    with pytest.raises(SystemExit) as stopped:
+        run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert stopped.value.code == 128 + 15
+    (killed,) = runs(launch, "train")
+    assert killed.info.status == "KILLED"
+    outcome = run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert outcome.training.how == "resumed" and outcome.training.run_id == killed.info.run_id
+    (train,) = runs(launch, "train")
+    assert train.info.status == "FINISHED" and train.data.tags["resumes"] == "1"
+    history = store(launch).client.get_metric_history(train.info.run_id, "train/loss")
+    assert sorted(m.step for m in history) == [64, 128, 192, 256]
+
+
+def test_a_killed_process_run_is_closed_and_resumed(launch: Path) -> None:
+    """SIGKILL leaves the run RUNNING with a dead pid; the next job marks it KILLED, then resumes it."""
+    cfg = make_cfg()
+    tracker = store(launch)
+    key = train_key(cfg)
+    run_id = tracker.start_run("train-dead", {"stage": "train", "train_key": key, "model": "proposed"})
+    tracker.set_tags(run_id, {"pid": "999999999"})  # no such process
+    (launch / "checkpoints" / key).mkdir(parents=True)
+    (launch / "checkpoints" / key / RUN_ID_FILE).write_text(run_id)
+    (launch / "checkpoints" / key / "last.pt").write_text("128")
+    learner = FakeLearner()
+    outcome = run_job(cfg, launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert outcome.training.how == "resumed" and outcome.training.run_id == run_id
+    assert [r.info.status for r in runs(launch, "train")] == ["FINISHED"]
+
+
+def test_non_learning_driver_only_evaluates(launch: Path) -> None:
+    learner = FakeLearner()
+    outcome = run_job(make_cfg("model=human"), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert outcome.training.how == "none" and not learner.calls
+    assert runs(launch, "train") == [] and len(runs(launch, "eval")) == 1
+
+
+def test_bad_value_stops_before_the_store_is_touched(tmp_path: Path) -> None:
+    from hgm_repro.simulator.config import ConfigError
+
+    with pytest.raises(ConfigError, match="learner.lr=-1"):
+        run_job(make_cfg("learner.lr=-1"), tmp_path, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    assert not (tmp_path / "mlflow.db").exists() and not os.listdir(tmp_path)
