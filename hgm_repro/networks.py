@@ -17,6 +17,8 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
+from .observations import decode_hgm  # x / 127.5 - 1: the inverse of the builders' encoding
+
 # Table 3: [filters, kernel, stride] of the three conv layers.
 PAPER_CONV: list[list[int]] = [[32, 8, 4], [64, 4, 2], [64, 3, 1]]
 # Table 3: the two dense layers of each head.
@@ -26,11 +28,6 @@ PAPER_HIDDEN: list[int] = [512, 256]
 def decode_camera(x: torch.Tensor) -> torch.Tensor:
     """uint8 RGB in [0, 255] -> float in [0, 1]."""
     return x.float() / 255.0
-
-
-def decode_hgm(x: torch.Tensor) -> torch.Tensor:
-    """uint8 HGM -> the paper's cell value in [-1, 1] (docs/interfaces.md: x / 127.5 - 1)."""
-    return x.float() / 127.5 - 1.0
 
 
 def conv_stack(in_channels: int, conv: Sequence[Sequence[int]] = PAPER_CONV) -> nn.Sequential:
