@@ -231,7 +231,7 @@ class HighwaySimulator:
         # --- physics sub-steps. The order along the road cannot change within a decision without a
         # crash, so each vehicle's leaders are found once, in the (at most two) lanes it occupies.
         nb2 = nearest_per_lane(s.pos_lon, lane_occupancy(s.pos_lat, half_wid, target_lane, s.active,
-                                                          c.lanes, c.lane_width))
+                                                          c.lanes, c.lane_width), with_follow=False)
         w = c.lane_width
         lane_lo = torch.minimum(((s.pos_lat - half_wid) / w).floor().long(), target_lane).clamp(0, c.lanes - 1)
         lane_hi = torch.maximum(((s.pos_lat + half_wid) / w).ceil().long() - 1, target_lane).clamp(0, c.lanes - 1)
@@ -325,9 +325,11 @@ class HighwaySimulator:
         # Who fell behind comes back ahead and vice versa; crashed NPCs by the side they were on.
         if self.respawn:
             spawn_front = ~active & (left_behind | (~left_ahead & (rel <= 0)))
-            for _ in range(2):  # up to two newcomers per edge and decision
-                self._respawn(~self.state.active & spawn_front, front=True)
-                self._respawn(~self.state.active & ~spawn_front, front=False)
+            st = self.state
+            occ = lane_occupancy(st.pos_lat, self.half_wid_t[st.vtype], st.target_lane, st.active, c.lanes,
+                                 c.lane_width)
+            self._respawn(~st.active & spawn_front, front=True, occupancy=occ)
+            self._respawn(~st.active & ~spawn_front, front=False, occupancy=occ)
 
         terminated = host_collision
         truncated = (decision >= c.episode_decisions) & ~terminated
@@ -367,64 +369,68 @@ class HighwaySimulator:
             1, lead.clamp(min=0).reshape(n, -1), pairs.reshape(n, -1).float())
         return pairs.any(-1) | (as_lead > 0)
 
-    def _respawn(self, candidates: torch.Tensor, front: bool) -> None:
-        """Bring back at most one waiting vehicle per env among `candidates`, at the front edge of
-        the window or at its rear edge. The lane is drawn among those with a safe gap to the
-        nearest vehicle there; where no lane is free the vehicle waits for the next decision."""
+    def _respawn(self, candidates: torch.Tensor, front: bool, occupancy: torch.Tensor, count: int = 2) -> None:
+        """Bring back up to `count` waiting vehicles per env among `candidates`, at the front edge
+        of the window or at its rear edge. Each goes just beyond the outermost vehicle of a lane
+        drawn among those with room in the spawn band; where no lane has room it waits."""
         c, s, d = self.config, self.state, self.device
         n, m = s.pos_lon.shape
         if not bool(candidates.any()):
             return
-        slot_idx = torch.arange(m, device=d)
-        # The waiting vehicle with the lowest slot index in each env.
-        slot = torch.where(candidates, slot_idx, m).amin(1)
-        has = slot < m
-        slot = slot.clamp(max=m - 1)
-        host_pos = s.pos_lon[:, HOST]
-        edge = host_pos + (c.window_ahead if front else -c.window_behind)
-        new_type = self._draw_types(n)
-        new_speed = c.v_min + self._rand(n) * (c.v_max - c.v_min)
-        hl_new = self.half_len_t[new_type].unsqueeze(1)
-        # The outermost active occupant of each lane; the newcomer goes just beyond it with a safe
-        # gap (or at the edge when that is further out), if that is still inside the spawn band.
-        half_len, half_wid = self.half_len_t[s.vtype], self.half_wid_t[s.vtype]
-        occ = lane_occupancy(s.pos_lat, half_wid, s.target_lane, s.active, c.lanes, c.lane_width)  # [N,M,L]
-        pos = s.pos_lon.unsqueeze(-1)
+        candidates = candidates.clone()
+        half_len = self.half_len_t[s.vtype]
+        pos = s.pos_lon.unsqueeze(-1).expand_as(occupancy)
         if front:
-            near_pos, near_idx = torch.where(occ, pos, -INF).max(1)  # [N, L]
+            near_pos, near_idx = pos.masked_fill(~occupancy, -INF).max(1)  # [N, L]
         else:
-            near_pos, near_idx = torch.where(occ, pos, INF).min(1)
+            near_pos, near_idx = pos.masked_fill(~occupancy, INF).min(1)
         near_speed = s.speed.gather(1, near_idx)
-        # The newcomer never closes in on its neighbour: ahead of the field it drives at least as
-        # fast as the vehicle behind it, behind the field at most as fast as the one ahead.
-        pick = torch.maximum if front else torch.minimum
-        lane_speed = pick(new_speed.unsqueeze(1), near_speed)
-        need = c.safety.min_gap + 0.5 * (near_speed if front else lane_speed) + hl_new + half_len.gather(1, near_idx)
-        empty = ~torch.isfinite(near_pos)
-        inner = edge.unsqueeze(1) - (5.0 if front else -5.0)
-        if front:
-            spot = torch.where(empty, inner, torch.maximum(inner, near_pos + need))
-            free = spot <= edge.unsqueeze(1) + SPAWN_ZONE - 5.0
-        else:
-            spot = torch.where(empty, inner, torch.minimum(inner, near_pos - need))
-            free = spot >= edge.unsqueeze(1) - SPAWN_ZONE + 5.0
-        score = torch.where(free, self._rand(n, c.lanes), -1.0)
-        lane = score.argmax(1, keepdim=True)
-        spawn_pos = spot.gather(1, lane).squeeze(1)
-        new_speed = torch.where(empty.gather(1, lane), new_speed.unsqueeze(1), lane_speed.gather(1, lane)).squeeze(1)
-        lane = lane.squeeze(1)
-        ok = has & free.any(1)
-        if not bool(ok.any()):
-            return
-        rows = torch.nonzero(ok).squeeze(1)
-        cols = slot[rows]
-        s.pos_lon[rows, cols] = spawn_pos[rows]
-        s.pos_lat[rows, cols] = self.lane_centres[lane[rows]]
-        s.speed[rows, cols] = new_speed[rows]
-        s.cruise[rows, cols] = new_speed[rows]
-        s.target_lane[rows, cols] = lane[rows]
-        s.vtype[rows, cols] = new_type[rows]
-        s.active[rows, cols] = True
-        s.color[rows, cols] = self._draw_colors(rows.numel())
-        s.was_ahead[rows, cols] = front
-        s.passed[rows, cols] = False
+        near_hl = half_len.gather(1, near_idx)
+        edge = (s.pos_lon[:, HOST] + (c.window_ahead if front else -c.window_behind)).unsqueeze(1)
+        inner = edge - (5.0 if front else -5.0)
+        slot_idx = torch.arange(m, device=d)
+        for _ in range(count):
+            # The waiting vehicle with the lowest slot index in each env.
+            slot = torch.where(candidates, slot_idx, m).amin(1)
+            has = slot < m
+            slot = slot.clamp(max=m - 1)
+            new_type = self._draw_types(n)
+            new_speed = c.v_min + self._rand(n) * (c.v_max - c.v_min)
+            hl_new = self.half_len_t[new_type].unsqueeze(1)
+            # The newcomer never closes in on its neighbour: ahead of the field it drives at least
+            # as fast as the vehicle behind it, behind the field at most as fast as the one ahead.
+            lane_speed = (torch.maximum if front else torch.minimum)(new_speed.unsqueeze(1), near_speed)
+            need = c.safety.min_gap + 0.5 * (near_speed if front else lane_speed) + hl_new + near_hl
+            empty = ~torch.isfinite(near_pos)
+            if front:
+                spot = torch.where(empty, inner, torch.maximum(inner, near_pos + need))
+                free = spot <= edge + SPAWN_ZONE - 5.0
+            else:
+                spot = torch.where(empty, inner, torch.minimum(inner, near_pos - need))
+                free = spot >= edge - SPAWN_ZONE + 5.0
+            score = torch.where(free, self._rand(n, c.lanes), -1.0)
+            lane = score.argmax(1, keepdim=True)
+            spawn_pos = spot.gather(1, lane).squeeze(1)
+            new_speed = torch.where(empty.gather(1, lane), new_speed.unsqueeze(1),
+                                    lane_speed.gather(1, lane)).squeeze(1)
+            lane = lane.squeeze(1)
+            ok = has & free.any(1)
+            if not bool(ok.any()):
+                return
+            rows = torch.nonzero(ok).squeeze(1)
+            cols, lanes = slot[rows], lane[rows]
+            s.pos_lon[rows, cols] = spawn_pos[rows]
+            s.pos_lat[rows, cols] = self.lane_centres[lanes]
+            s.speed[rows, cols] = new_speed[rows]
+            s.cruise[rows, cols] = new_speed[rows]
+            s.target_lane[rows, cols] = lanes
+            s.vtype[rows, cols] = new_type[rows]
+            s.active[rows, cols] = True
+            s.color[rows, cols] = self._draw_colors(rows.numel())
+            s.was_ahead[rows, cols] = front
+            s.passed[rows, cols] = False
+            candidates[rows, cols] = False
+            # The newcomer is now the outermost vehicle of its lane.
+            near_pos[rows, lanes] = spawn_pos[rows]
+            near_speed[rows, lanes] = new_speed[rows]
+            near_hl[rows, lanes] = hl_new[rows, 0]

@@ -38,28 +38,36 @@ class Neighbours:
     occupancy: torch.Tensor
 
 
-def nearest_per_lane(pos_lon: torch.Tensor, occupancy: torch.Tensor) -> Neighbours:
+def nearest_per_lane(pos_lon: torch.Tensor, occupancy: torch.Tensor, with_follow: bool = True) -> Neighbours:
+    """Lead (and, unless `with_follow` is False, follow) tables for every vehicle and lane."""
     n, m, lanes = occupancy.shape
     device = pos_lon.device
     order = pos_lon.argsort(dim=1, stable=True)  # rank -> vehicle
     ranks = torch.arange(m, device=device)
     rank_of = torch.empty_like(order).scatter_(1, order, ranks.expand(n, m))  # vehicle -> rank
     occ_sorted = occupancy.gather(1, order.unsqueeze(-1).expand(n, m, lanes))
-    r = ranks.view(1, m, 1)
+    # Ranks as int16 and arithmetic instead of torch.where: several times faster on CPU, and
+    # ranks never exceed a few hundred. A non-occupant gets a rank outside [0, m).
+    r = ranks.to(torch.int16).view(1, m, 1)
+    vacant = (~occ_sorted).to(torch.int16)
     # Nearest occupant at a strictly higher rank (ahead) / strictly lower rank (behind).
-    at_or_after = torch.where(occ_sorted, r, m).flip(1).cummin(1).values.flip(1)
+    at_or_after = (r + vacant * m).flip(1).cummin(1).values.flip(1)
     ahead = torch.cat([at_or_after[:, 1:], at_or_after.new_full((n, 1, lanes), m)], dim=1)
-    at_or_before = torch.where(occ_sorted, r, -1).cummax(1).values
-    behind = torch.cat([at_or_before.new_full((n, 1, lanes), -1), at_or_before[:, :-1]], dim=1)
 
-    def to_vehicle(rank_table: torch.Tensor, missing: torch.Tensor) -> torch.Tensor:
-        # rank of neighbour -> neighbour's vehicle index; then re-index rows by the asking vehicle.
-        idx = order.gather(1, rank_table.clamp(0, m - 1).reshape(n, m * lanes)).reshape(n, m, lanes)
-        idx = torch.where(missing, torch.full_like(idx, NONE), idx)
+    def to_vehicle(rank_table: torch.Tensor) -> torch.Tensor:
+        # rank of neighbour -> neighbour's vehicle index (NONE if no neighbour); then rows re-indexed
+        # by the asking vehicle.
+        missing = ((rank_table < 0) | (rank_table >= m)).long()
+        idx = order.gather(1, rank_table.long().clamp(0, m - 1).reshape(n, m * lanes)).reshape(n, m, lanes)
+        idx = idx - (idx - NONE) * missing
         return idx.gather(1, rank_of.unsqueeze(-1).expand(n, m, lanes))
 
-    lead = to_vehicle(ahead, ahead >= m)
-    follow = to_vehicle(behind, behind < 0)
+    lead = to_vehicle(ahead)
+    follow = lead
+    if with_follow:
+        at_or_before = (r - vacant * (m + 1)).cummax(1).values
+        behind = torch.cat([at_or_before.new_full((n, 1, lanes), -1), at_or_before[:, :-1]], dim=1)
+        follow = to_vehicle(behind)
     return Neighbours(lead=lead, follow=follow, occupancy=occupancy)
 
 
