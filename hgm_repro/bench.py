@@ -153,14 +153,18 @@ def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, 
     cfg = _compose("experiment=quick", f"device={device}", f"learner.total_steps={total_steps}",
                    f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
                    f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+    threads = torch.get_num_threads()  # the preset may pin its own thread count: put ours back after
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
         train(cfg, Path(tmp), lambda metrics, step: None)
         _sync(device)
         elapsed = time.perf_counter() - start
+    used = torch.get_num_threads()
+    torch.set_num_threads(threads)
     return dict(what="learner training (quick preset, end to end)", device=str(device), n_envs=n_envs,
                 camera="front", hgm="paper", image=f"{cfg.observation.height}x{cfg.observation.width}",
-                update_every=int(cfg.learner.update_every), env_steps_per_s=round(total_steps / elapsed, 1))
+                update_every=int(cfg.learner.update_every), env_steps_per_s=round(total_steps / elapsed, 1),
+                torch_threads=used)
 
 
 def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[str, Any] | None:
