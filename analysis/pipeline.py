@@ -20,6 +20,7 @@ from analysis.load import EVAL_METRICS, StoreData
 from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import ReportInputs, fmt_estimate, write_report
 from analysis.stats import mean_ci
+from hgm_repro.config_tree import flatten
 
 
 @dataclass
@@ -27,15 +28,6 @@ class Outputs:
     report: Path
     figures: dict[str, dict[str, Path]]
     csvs: list[Path]
-
-
-def _flatten(node: Any, prefix: str = "") -> dict[str, Any]:
-    if isinstance(node, dict):
-        out: dict[str, Any] = {}
-        for k, v in node.items():
-            out.update(_flatten(v, f"{prefix}{k}."))
-        return out
-    return {prefix[:-1]: node}
 
 
 def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFrame | None, str]:
@@ -53,7 +45,7 @@ def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFram
         try:
             from hgm_repro import CONF_DIR
 
-            flat = _flatten(yaml.safe_load((Path(CONF_DIR) / "simulator" / "highway.yaml").read_text()))
+            flat = flatten(yaml.safe_load((Path(CONF_DIR) / "simulator" / "highway.yaml").read_text()))
             source = "from conf/simulator/highway.yaml: the runs did not log them"
         except Exception as exc:  # noqa: BLE001 - the report still builds without this table
             return [], None, f"not available ({type(exc).__name__})"
@@ -77,12 +69,12 @@ def _config_texts(configs: dict[str, str]) -> dict[str, str]:
     base_model = order[0]
     out = {base_model: configs[base_model]}
     try:
-        base = _flatten(yaml.safe_load(configs[base_model]) or {})
+        base = flatten(yaml.safe_load(configs[base_model]) or {})
     except yaml.YAMLError:
         return {m: configs[m] for m in order}
     for model in order[1:]:
         try:
-            other = _flatten(yaml.safe_load(configs[model]) or {})
+            other = flatten(yaml.safe_load(configs[model]) or {})
         except yaml.YAMLError:
             out[model] = configs[model]
             continue

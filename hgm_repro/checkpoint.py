@@ -18,6 +18,8 @@ from typing import Any
 import torch
 from omegaconf import DictConfig, OmegaConf
 
+from .config_tree import flatten
+
 CHECKPOINT_FORMAT = 1
 
 # Learner keys that change how a run is measured or run, not what it learns: they may differ
@@ -51,18 +53,7 @@ def training_config(cfg: DictConfig) -> dict[str, Any]:
         "train_scenario": _plain(cfg.train_scenario),
         "seed": cfg.seed,
     }
-    return _flatten(tree)
-
-
-def _flatten(tree: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    flat: dict[str, Any] = {}
-    for key, value in tree.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, dict) and value:
-            flat.update(_flatten(value, name + "."))
-        else:
-            flat[name] = value
-    return flat
+    return flatten(tree)
 
 
 def config_fingerprint(config: dict[str, Any]) -> str:

@@ -25,6 +25,7 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from . import PACKAGE_ROOT
+from .config_tree import flatten as flatten_tree
 from .interrupts import protected
 
 log = logging.getLogger(__name__)
@@ -104,16 +105,7 @@ def git_info(repo_root: Path = PACKAGE_ROOT.parent) -> tuple[str, str]:
 
 def flatten(node: Mapping[str, Any] | DictConfig, prefix: str = "") -> dict[str, str]:
     """`{'a': {'b': 1}}` -> `{'a.b': '1'}`, values cut to MLflow's param length."""
-    if isinstance(node, DictConfig):
-        node = OmegaConf.to_container(node, resolve=True)
-    flat: dict[str, str] = {}
-    for key, value in node.items():
-        name = f"{prefix}{key}"
-        if isinstance(value, Mapping) and value:
-            flat.update(flatten(value, name + "."))
-        else:
-            flat[name] = str(value)[:MAX_PARAM_VALUE]
-    return flat
+    return {k: str(v)[:MAX_PARAM_VALUE] for k, v in flatten_tree(node, prefix).items()}
 
 
 def _chunks(items: list[T], size: int) -> Iterable[list[T]]:
