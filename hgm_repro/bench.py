@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import platform
 import sys
 import time
@@ -209,6 +210,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--device", choices=["cpu", "cuda", "all"], default="all",
                         help="which devices to measure (default: every one present)")
     args = parser.parse_args(argv)
+    # stdout carries only the JSON lines: TorchRL logs its storage set-up there at INFO level
+    # (and sets that level when first imported, so import it before turning it down).
+    import torchrl  # noqa: F401
+
+    logging.getLogger("torchrl").setLevel(logging.WARNING)
     if args.threads:
         torch.set_num_threads(args.threads)
     parts = set(args.only or ["simulator", "observations", "learner", "highway"])

@@ -1,0 +1,29 @@
+"""The benchmark's output format (its numbers are for people, not for asserts)."""
+
+from __future__ import annotations
+
+import json
+
+from hgm_repro.bench import main
+
+REQUIRED = {"what", "device", "n_envs", "camera", "env_steps_per_s"}
+
+
+def test_bench_prints_one_json_object_per_configuration(capsys):
+    assert main(["--only", "simulator", "--only", "observations", "--n-envs", "2", "--obs-n-envs", "2",
+                 "--seconds", "0.05", "--device", "cpu"]) == 0
+    lines = [line for line in capsys.readouterr().out.splitlines() if line.strip()]
+    rows = [json.loads(line) for line in lines]  # every stdout line is JSON
+    assert len(rows) == 1 + 8  # the simulator, then each observation variant
+    for row in rows:
+        assert REQUIRED <= set(row)
+        assert row["env_steps_per_s"] > 0
+    assert {r["what"] for r in rows} >= {"simulator", "simulator+proposed", "simulator+hgm"}
+
+
+def test_bench_learner_reports_updates_per_second(capsys):
+    assert main(["--only", "learner", "--seconds", "0.05", "--train-steps", "128", "--device", "cpu"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    update = next(r for r in rows if r["what"] == "learner update")
+    assert update["updates_per_s"] > 0 and update["batch_size"] == 64
+    assert any(r["what"].startswith("learner training") and r["env_steps_per_s"] > 0 for r in rows)
