@@ -5,6 +5,7 @@ See the package docstring (`hgm_repro.learner`) for what a checkpoint holds and 
 
 from __future__ import annotations
 
+import logging
 import math
 import random
 import sys
@@ -37,6 +38,7 @@ from .builders import (
 )
 
 Log = Callable[[dict[str, float], int], None]
+logger = logging.getLogger(__name__)
 
 # Per-episode metrics logged as train/<name> (means over episodes finished since the last log).
 TRAIN_EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "episode_return", "collisions")
@@ -225,6 +227,10 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
                             "train/episodes": float(len(episodes["avg_speed_kmh"])),
                             "train/updates": float(updates_done)})
             log(metrics, steps_done)
+            if progress.disable:  # no bar when output goes to a file: a line per log interval instead
+                logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h",
+                            cfg.model.name, steps_done, total_steps, metrics["train/steps_per_s"],
+                            metrics["train/epsilon"], metrics.get("train/avg_speed_kmh", float("nan")))
             episodes = {k: [] for k in TRAIN_EPISODE_METRICS}
             losses = []
             last_log_steps, last_log_time = steps_done, now
