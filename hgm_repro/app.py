@@ -14,7 +14,8 @@ import logging
 import os
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -196,10 +197,18 @@ def _train(
     def log_to_run(metrics: dict[str, float], step: int) -> None:
         tracker.log_metrics(run_id, metrics, step)
 
-    try:
+    with _run_status(tracker, run_id):
         checkpoint = Path(train_fn(cfg, checkpoint_dir, log_to_run)).resolve()
         tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
         tracker.set_tags(run_id, {"checkpoint_path": str(checkpoint)})
+    return Training(how, run_id, checkpoint)
+
+
+@contextmanager
+def _run_status(tracker: Tracker, run_id: str) -> Iterator[None]:
+    """Ends the run FINISHED, or KILLED when the job was interrupted, or FAILED on any error."""
+    try:
+        yield
     except JobInterrupted:
         tracker.end(run_id, "KILLED")
         raise
@@ -207,7 +216,6 @@ def _train(
         tracker.end(run_id, "FAILED")
         raise
     tracker.end(run_id, "FINISHED")
-    return Training(how, run_id, checkpoint)
 
 
 # --- evaluation ---------------------------------------------------------------------------
@@ -224,7 +232,7 @@ def evaluate_and_log(
         eval_tags["train_run_id"] = training.run_id
     name = f"eval-{job.model.name}-s{job.scenario.name}-seed{job.seed}"
     run_id = tracker.start_run(name, eval_tags, parent_run_id)
-    try:
+    with _run_status(tracker, run_id):
         tracker.log_params(run_id, flatten(cfg))
         tracker.log_text(run_id, OmegaConf.to_yaml(cfg, resolve=True), "config.yaml")
         result = evaluate_fn(cfg, cfg.scenario, training.checkpoint)
@@ -236,13 +244,6 @@ def evaluate_and_log(
             tracker.log_artifact(run_id, episodes)
             if job.tracking.log_gif:
                 _log_gif(cfg, training, tracker, run_id, Path(tmp))
-    except JobInterrupted:
-        tracker.end(run_id, "KILLED")
-        raise
-    except BaseException:
-        tracker.end(run_id, "FAILED")
-        raise
-    tracker.end(run_id, "FINISHED")
     return run_id, means
 
 
