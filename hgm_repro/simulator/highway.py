@@ -251,7 +251,9 @@ class HighwaySimulator:
             gap = torch.where(has_lead, gather_vehicles(pos_lon, lead, INF) - pos_lon.unsqueeze(-1) - len_sum, INF)
             # Collisions: a leader in a shared lane whose body overlaps ours; a pair is (i, lead).
             overlap = (gap < 0) & ((gather_vehicles(pos_lat, lead, 0.0) - pos_lat.unsqueeze(-1)).abs() < wid_sum)
-            if bool(overlap.any()):
+            # On CPU skipping the bookkeeping when nothing overlaps pays; on a GPU the check itself
+            # would stall the stream, so the bookkeeping always runs there.
+            if self.device.type != "cpu" or bool(overlap.any()):
                 hit, npc_crashes = self._record_crashes(overlap, lead, hit, npc_crashes)
             # Longitudinal: eq. 2 for everyone, then the Krauss safe speed for guarded drivers.
             v_cmd = speed + accel_cmd * dt
