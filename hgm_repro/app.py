@@ -23,7 +23,7 @@ from typing import Any
 from filelock import FileLock, Timeout
 from omegaconf import DictConfig, OmegaConf
 
-from .interrupts import JobInterrupted, sigterm_raises
+from .interrupts import JobInterrupted, raise_if_pending, sigterm_raises
 from .schema import JobConfig, validate
 from .tracking import PARENT_RUN_ENV, Tracker, flatten, git_info, resolve_location
 from .train_key import train_key, training_config
@@ -113,7 +113,12 @@ def obtain_checkpoint(
         lock.acquire(timeout=0)
     except Timeout:
         log.info("train_key=%s is being trained by another job: waiting for it", key)
-        lock.acquire()
+        while True:  # in slices, so that a SIGTERM while waiting still stops the job
+            try:
+                lock.acquire(timeout=1.0)
+                break
+            except Timeout:
+                raise_if_pending()
     try:
         unfinished = _unfinished_training(tracker, checkpoint_dir)
         if unfinished is None:

@@ -24,6 +24,7 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from .checkpoint import load_checkpoint
 from .envs import make_env
+from .interrupts import raise_if_pending
 from .simulator import N_ACTIONS
 
 EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m",
@@ -105,6 +106,7 @@ def evaluate(cfg: DictConfig, scenario_node, checkpoint: Path | None) -> Evaluat
     with set_exploration_type(ExplorationType.DETERMINISTIC):
         td = env.reset()
         for _ in range(iterations):
+            raise_if_pending()  # a SIGTERM stops the evaluation between steps
             td = policy(td)
             transition, td = env.step_and_maybe_reset(td)  # td: the next step's input (reset where done)
             done = transition["next", "done"].reshape(-1)

@@ -1,9 +1,12 @@
-"""SIGTERM as an exception that waits for the write in progress.
+"""SIGTERM as an exception, raised only at safe points.
 
 Schedulers (SLURM, Kubernetes, a user's `kill`) stop a job with SIGTERM. Turned into
 `JobInterrupted` the job can close its MLflow runs as KILLED and leave its checkpoint
-directory ready for a resume. A store write or a checkpoint save that is under way when
-the signal lands finishes first: code wraps such writes in `protected()`.
+directory ready for a resume. The handler only records the signal: raising from inside
+arbitrary library code (a tensordict context manager, a store write) can leave that code in
+a broken state or turn the interrupt into another error. Loops call `raise_if_pending()`
+once per iteration (training batches, evaluation steps, waiting for a lock), and a
+`protected()` block raises a pending signal when it ends.
 """
 
 from __future__ import annotations
@@ -29,10 +32,15 @@ _pending: int | None = None
 
 def _on_signal(signum: int, frame: FrameType | None) -> None:
     global _pending
-    if _depth > 0:
-        _pending = signum  # raised when the protected write ends
-        return
-    raise JobInterrupted(signum)
+    _pending = signum  # raised at the next safe point
+
+
+def raise_if_pending() -> None:
+    """Raise `JobInterrupted` if SIGTERM arrived since the last safe point (outside `protected()`)."""
+    global _pending
+    if _pending is not None and _depth == 0:
+        signum, _pending = _pending, None
+        raise JobInterrupted(signum)
 
 
 @contextmanager
@@ -44,9 +52,7 @@ def protected() -> Iterator[None]:
         yield
     finally:
         _depth -= 1
-        if _depth == 0 and _pending is not None:
-            signum, _pending = _pending, None
-            raise JobInterrupted(signum)
+    raise_if_pending()
 
 
 @contextmanager
@@ -55,8 +61,10 @@ def sigterm_raises() -> Iterator[None]:
     if threading.current_thread() is not threading.main_thread():
         yield
         return
+    global _pending
     previous = signal.signal(signal.SIGTERM, _on_signal)
     try:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+        _pending = None  # a signal after the last safe point came when the work was already done

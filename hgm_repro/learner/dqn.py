@@ -26,6 +26,7 @@ from tqdm import tqdm
 
 from ..checkpoint import config_fingerprint, load_checkpoint, save_checkpoint, training_config
 from ..envs import make_env
+from ..interrupts import raise_if_pending
 from ..networks import param_counts
 from .builders import (
     make_actor,
@@ -173,6 +174,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
 
     # --- the loop: collect one step of every env, store it, learn, log, checkpoint ---------------
     for batch in collector:
+        raise_if_pending()  # a SIGTERM stops training here, between batches, never inside one
         batch: TensorDictBase = batch.reshape(-1)
         steps_before, steps_done = steps_done, steps_done + batch.numel()
         exploration.step(batch.numel())
