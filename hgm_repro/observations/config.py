@@ -7,10 +7,11 @@ checked here, so a bad one fails before the first frame with a message naming it
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
+
+from ..simulator.config import finite_number
 
 CAMERAS = ("front", "birdseye", "none")
 HGM_VARIANTS = ("paper", "enriched", "none")
@@ -46,12 +47,6 @@ def _positive_int(name: str, value: Any) -> int:
     if isinstance(value, bool) or not isinstance(value, int):
         raise ValueError(f"observation.{name}={value!r} is not allowed: expected a whole number")
     return value
-
-
-def _finite(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ValueError(f"observation.{name}={value!r} is not allowed: expected a finite number")
-    return float(value)
 
 
 @dataclass(frozen=True)
@@ -90,15 +85,15 @@ class ObservationConfig:
             raise ValueError(f"observation.frame_stack={self.frame_stack} is not allowed: need >= 1")
         if _positive_int("coord_k", self.coord_k) < 1:
             raise ValueError(f"observation.coord_k={self.coord_k} is not allowed: need >= 1")
-        if _finite("v2x_range", self.v2x_range) <= 0:
+        if finite_number("observation.v2x_range", self.v2x_range) <= 0:
             raise ValueError(f"observation.v2x_range={self.v2x_range} is not allowed: need > 0 (m)")
-        fov = _finite("camera_fov_deg", self.camera_fov_deg)
+        fov = finite_number("observation.camera_fov_deg", self.camera_fov_deg)
         if not 1.0 <= fov <= 170.0:
             raise ValueError(f"observation.camera_fov_deg={fov} is not allowed: need 1..170 degrees "
                              "(a pinhole camera cannot see 180 degrees)")
-        if _finite("camera_height", self.camera_height) <= 0:
+        if finite_number("observation.camera_height", self.camera_height) <= 0:
             raise ValueError(f"observation.camera_height={self.camera_height} is not allowed: need > 0 (m)")
-        if _finite("camera_max_range", self.camera_max_range) <= 0:
+        if finite_number("observation.camera_max_range", self.camera_max_range) <= 0:
             raise ValueError(f"observation.camera_max_range={self.camera_max_range} is not allowed: need > 0 (m)")
         if self.camera == "none" and self.hgm == "none" and not self.coordinates:
             # A non-learning driver needs no observation; that is fine, the builder then makes none.

@@ -25,7 +25,7 @@ def _require(ok: bool, message: str) -> None:
         raise ConfigError(message)
 
 
-def _number(where: str, value: Any) -> float:
+def finite_number(where: str, value: Any) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
         raise ConfigError(f"{where}={value!r} is not allowed: expected a finite number")
     return float(value)
@@ -53,7 +53,7 @@ class VehicleType:
         _require(not unknown, f"{where} has unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
         missing = {"a_lon", "v_lat", "r_lon", "r_lat", "connected"} - set(raw)
         _require(not missing, f"{where} misses field(s) {sorted(missing)}")
-        values = {k: (bool(v) if k == "connected" else _number(f"{where}.{k}", v)) for k, v in raw.items()}
+        values = {k: (bool(v) if k == "connected" else finite_number(f"{where}.{k}", v)) for k, v in raw.items()}
         vt = cls(name=name, **values)
         _require(vt.a_lon > 0, f"{where}.a_lon={vt.a_lon} is not allowed: must be > 0 (m/s^2)")
         _require(vt.v_lat > 0, f"{where}.v_lat={vt.v_lat} is not allowed: must be > 0 (m/s)")
@@ -156,9 +156,10 @@ class SimulatorConfig:
             unknown = set(sub) - set(klass.__dataclass_fields__)
             _require(not unknown, f"simulator.{group} has unknown field(s) {sorted(unknown)}; "
                                   f"allowed: {sorted(klass.__dataclass_fields__)}")
-        safety = SafetyConfig(**{k: _number(f"simulator.safety.{k}", v) for k, v in safety_raw.items()})
-        reward = RewardConfig(**{k: (bool(v) if k == "overtake_per_vehicle" else _number(f"simulator.reward.{k}", v))
-                                 for k, v in reward_raw.items()})
+        safety = SafetyConfig(**{k: finite_number(f"simulator.safety.{k}", v) for k, v in safety_raw.items()})
+        reward = RewardConfig(**{
+            k: (bool(v) if k == "overtake_per_vehicle" else finite_number(f"simulator.reward.{k}", v))
+            for k, v in reward_raw.items()})
         cfg = cls(vehicle_types=types, safety=safety, reward=reward, **raw)
         cfg.validate()
         return cfg
@@ -168,9 +169,9 @@ class SimulatorConfig:
                  f"simulator.lanes={self.lanes!r} is not allowed: need a whole number >= 1")
         for name in ("lane_width", "decision_dt", "physics_dt", "episode_seconds", "window_behind",
                      "window_ahead", "density_per_km_per_lane"):
-            v = _number(f"simulator.{name}", getattr(self, name))
+            v = finite_number(f"simulator.{name}", getattr(self, name))
             _require(v > 0, f"simulator.{name}={v} is not allowed: must be > 0")
-        _require(0 <= _number("simulator.v_min_kmh", self.v_min_kmh),
+        _require(0 <= finite_number("simulator.v_min_kmh", self.v_min_kmh),
                  f"simulator.v_min_kmh={self.v_min_kmh} is not allowed: must be >= 0")
         _require(self.v_min_kmh < self.v_max_kmh,
                  f"simulator.v_min_kmh={self.v_min_kmh} >= v_max_kmh={self.v_max_kmh} is not allowed: "
@@ -215,7 +216,7 @@ class ScenarioConfig:
         for type_name, share in ratios_raw.items():
             _require(type_name in npc_types,
                      f"scenario {name}: unknown vehicle type {type_name!r} in ratios; allowed: {npc_types}")
-            s = _number(f"scenario.ratios.{type_name}", share)
+            s = finite_number(f"scenario.ratios.{type_name}", share)
             _require(s >= 0, f"scenario {name}: ratios.{type_name}={s} is not allowed: a share must be >= 0")
             ratios.append((str(type_name), s))
         total = sum(s for _, s in ratios)
