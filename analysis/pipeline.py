@@ -20,7 +20,7 @@ from analysis.load import EVAL_METRICS, StoreData
 from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import ReportInputs, fmt_estimate, write_report
 from analysis.stats import mean_ci
-from hgm_repro.config_tree import flatten
+from hgm_repro.experiment.config_tree import flatten
 
 
 @dataclass

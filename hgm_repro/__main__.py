@@ -1,7 +1,7 @@
 """`python -m hgm_repro`: one job (or, with -m, a sweep of jobs) of the reproduction.
 
 Kept thin so that `--help` and `--cfg job` answer without importing torch or MLflow;
-the job itself lives in `hgm_repro.app`.
+the job itself lives in `hgm_repro.experiment.job`.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ def quote_numeric_choices(argv: list[str]) -> list[str]:
 
 @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
 def _hydra_main(cfg: DictConfig) -> float | None:
-    from hgm_repro.app import hydra_job
+    from hgm_repro.experiment.job import hydra_job
 
     return hydra_job(cfg)
 

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import pytest
 
-from hgm_repro.checkpoint import CheckpointMismatchError
 from hgm_repro.evaluation import EPISODE_METRICS, evaluate
+from hgm_repro.experiment.checkpoint import CheckpointMismatchError
 from hgm_repro.learner import train
 
 from .test_learner import Recorder, compose_cfg

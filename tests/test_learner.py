@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from hgm_repro import CONF_DIR
-from hgm_repro.checkpoint import CheckpointMismatchError, load_checkpoint
+from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint
 from hgm_repro.learner import NonFiniteLossError, train
 from hgm_repro.learner import dqn as dqn_module
 from hgm_repro.learner.priority_trees import MinTree, SumTree

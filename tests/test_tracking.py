@@ -13,10 +13,10 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from hgm_repro import CONF_DIR
-from hgm_repro.app import RUN_ID_FILE, run_job
-from hgm_repro.interrupts import JobInterrupted
-from hgm_repro.tracking import Tracker, flatten, git_info, resolve_location, retry
-from hgm_repro.train_key import train_key
+from hgm_repro.experiment.interrupts import JobInterrupted
+from hgm_repro.experiment.job import RUN_ID_FILE, run_job
+from hgm_repro.experiment.tracking import Tracker, flatten, git_info, resolve_location, retry
+from hgm_repro.experiment.train_key import train_key
 
 
 def make_cfg(*overrides: str) -> DictConfig:

@@ -24,9 +24,9 @@ from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.objectives import HardUpdate
 from tqdm import tqdm
 
-from ..checkpoint import config_fingerprint, load_checkpoint, save_checkpoint, training_config
 from ..envs import make_env
-from ..interrupts import raise_if_pending
+from ..experiment.checkpoint import config_fingerprint, load_checkpoint, save_checkpoint, training_config
+from ..experiment.interrupts import raise_if_pending
 from ..networks import param_counts
 from .builders import (
     make_actor,

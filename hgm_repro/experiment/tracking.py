@@ -24,7 +24,7 @@ from filelock import FileLock
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
-from . import PACKAGE_ROOT
+from .. import PACKAGE_ROOT
 from .config_tree import flatten as flatten_tree
 from .interrupts import protected
 
@@ -251,12 +251,11 @@ class SweepTracking(Callback):
         self._parent: str | None = None
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
-        from .schema import validate
-
         # Values not swept over are the same in every job: a bad one stops the sweep here,
         # before the store or any job is touched. Swept values are checked by each job.
         # Hydra turns a callback's exception into a warning, so stop with SystemExit instead.
-        from .simulator.config import ConfigError
+        from ..simulator.config import ConfigError
+        from .schema import validate
 
         try:
             validate(OmegaConf.masked_copy(config, [k for k in config if k != "hydra"]))

@@ -183,7 +183,7 @@ def _train(
     train_fn: TrainFn | None, checkpoint_dir: Path, unfinished: str | None,
 ) -> Training:
     if train_fn is None:
-        from .learner import train as train_fn
+        from ..learner import train as train_fn
     job_tags = {**tags, "stage": "train", "scenario": str(cfg.train_scenario.name)}
     if unfinished is not None:
         run_id, how = unfinished, "resumed"
@@ -231,7 +231,7 @@ def evaluate_and_log(
     training: Training, evaluate_fn: EvaluateFn | None,
 ) -> tuple[str, dict[str, float]]:
     if evaluate_fn is None:
-        from .evaluation import evaluate as evaluate_fn
+        from ..evaluation import evaluate as evaluate_fn
     eval_tags = {**tags, "stage": "eval", "scenario": job.scenario.name, "training": training.how}
     if training.run_id:
         eval_tags["train_run_id"] = training.run_id
@@ -255,7 +255,7 @@ def evaluate_and_log(
 def _log_gif(cfg: DictConfig, training: Training, tracker: Tracker, run_id: str, tmp: Path) -> None:
     """One evaluation episode as a GIF; optional, since a missing video must not fail a job."""
     try:
-        from .media import record_gif
+        from ..evaluation.media import record_gif
     except ImportError as error:
         log.info("episode GIF skipped: %s", error)
         tracker.set_tags(run_id, {"gif": f"skipped: {error}"})

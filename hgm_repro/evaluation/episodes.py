@@ -22,10 +22,10 @@ from tensordict import TensorDictBase
 from torch.nn import functional as F
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
-from .checkpoint import load_checkpoint
-from .envs import make_env
-from .interrupts import raise_if_pending
-from .simulator import N_ACTIONS
+from ..envs import make_env
+from ..experiment.checkpoint import load_checkpoint
+from ..experiment.interrupts import raise_if_pending
+from ..simulator import N_ACTIONS
 
 EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m",
                    "episode_return", "decisions")
@@ -53,7 +53,7 @@ Policy = Callable[[TensorDictBase], TensorDictBase]
 
 
 def _learned_policy(cfg: DictConfig, checkpoint: Path | None, device: torch.device) -> Policy:
-    from .learner.builders import make_actor, make_network
+    from ..learner.builders import make_actor, make_network
 
     if checkpoint is None:
         raise ValueError(f"model '{cfg.model.name}' is learned: evaluate() needs its checkpoint")

@@ -19,8 +19,8 @@ from typing import Any, Literal
 
 from omegaconf import DictConfig, OmegaConf
 
-from .simulator.config import ConfigError, ScenarioConfig, SimulatorConfig
-from .simulator.loading import scenario_config, simulator_config
+from ..simulator.config import ConfigError, ScenarioConfig, SimulatorConfig
+from ..simulator.loading import scenario_config, simulator_config
 
 
 @dataclass(frozen=True)

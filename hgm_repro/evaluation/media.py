@@ -13,10 +13,10 @@ from pathlib import Path
 import torch
 from omegaconf import DictConfig
 
-from .envs.video import record_episode
-from .observations import ObservationBuilder, ObservationConfig
-from .simulator import HighwaySimulator
-from .simulator.loading import scenario_config, simulator_config
+from ..envs.video import record_episode
+from ..observations import ObservationBuilder, ObservationConfig
+from ..simulator import HighwaySimulator
+from ..simulator.loading import scenario_config, simulator_config
 
 # Film a different episode than evaluation's first one, but the same one on every run of the job.
 GIF_SEED_OFFSET = 7919
@@ -27,8 +27,8 @@ Policy = Callable[[HighwaySimulator], torch.Tensor]
 
 def greedy_policy(cfg: DictConfig, checkpoint: Path, sim: HighwaySimulator) -> Policy:
     """`sim -> actions`: argmax of the trained network over stacked observations of `sim`."""
-    from .checkpoint import load_checkpoint
-    from .learner.builders import make_network
+    from ..experiment.checkpoint import load_checkpoint
+    from ..learner.builders import make_network
 
     device = torch.device(cfg.device)
     net = make_network(cfg).to(device)
