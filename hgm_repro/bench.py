@@ -98,6 +98,43 @@ def bench_observations(variant: str, n_envs: int, device: torch.device, seconds:
                 frame_stack=frame_stack, env_steps_per_s=round(calls * n_envs / elapsed, 1))
 
 
+def bench_observations_under_resets(variant: str, n_envs: int, device: torch.device, seconds: float,
+                                    reset_fraction: float = 1 / 16, size: int = 84,
+                                    frame_stack: int = 4) -> dict[str, Any]:
+    """Observation cost when every step also resets a few envs, as early in training (short
+    episodes that end in crashes): each step a random `reset_fraction` of the envs restarts, and the
+    builder pushes a frame for all envs and refills the stacks of the reset ones, as the TorchRL env
+    does. `observation_env_steps_per_s` counts only the builders' time."""
+    from .observations import ObservationBuilder, ObservationConfig
+
+    streams = OBS_VARIANTS[variant]
+    obs_cfg = ObservationConfig.from_config(dict(height=size, width=size, frame_stack=frame_stack), streams)
+    sim = _simulator(n_envs, device)
+    builder = ObservationBuilder(sim, obs_cfg)
+    builder.reset()
+    gen = torch.Generator(device=device).manual_seed(0)
+    builder_seconds: list[float] = []
+
+    def one_step() -> None:
+        sim.step(sim.npc_actions(sim.state)[:, HOST])
+        restart = torch.rand(n_envs, generator=gen, device=device) < reset_fraction
+        sim.reset(restart)
+        _sync(device)
+        start = time.perf_counter()
+        builder.step()
+        builder.reset(restart)
+        _sync(device)
+        builder_seconds.append(time.perf_counter() - start)
+
+    calls, elapsed = _timed(one_step, device, seconds)
+    spent = sum(builder_seconds[-calls:])  # without the warm-up calls
+    return dict(what=f"simulator+{variant} under resets", device=str(device), n_envs=n_envs,
+                camera=streams["camera"], hgm=streams["hgm"], coordinates=streams["coordinates"],
+                image=f"{size}x{size}", frame_stack=frame_stack, reset_fraction=reset_fraction,
+                env_steps_per_s=round(calls * n_envs / elapsed, 1),
+                observation_env_steps_per_s=round(calls * n_envs / spent, 1))
+
+
 def _compose(*overrides: str) -> Any:
     from hydra import compose, initialize_config_dir
 
@@ -245,6 +282,8 @@ def main(argv: list[str] | None = None) -> int:
             for variant in OBS_VARIANTS:
                 print(f"simulator+{variant} n_envs={n} on {device}...", file=sys.stderr)
                 emit(bench_observations(variant, n, device, args.seconds))
+            print(f"simulator+proposed under resets n_envs={n} on {device}...", file=sys.stderr)
+            emit(bench_observations_under_resets("proposed", n, device, args.seconds))
         if "learner" in parts:
             modes = ["eager", "compile", "cuda_graph"] if gpu else ["eager"]
             for mode in modes:

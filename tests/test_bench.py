@@ -14,7 +14,7 @@ def test_bench_prints_one_json_object_per_configuration(capsys):
                  "--seconds", "0.05", "--device", "cpu"]) == 0
     lines = [line for line in capsys.readouterr().out.splitlines() if line.strip()]
     rows = [json.loads(line) for line in lines]  # every stdout line is JSON
-    assert len(rows) == 1 + 8  # the simulator, then each observation variant
+    assert len(rows) == 1 + 8 + 1  # the simulator, each observation variant, the proposed one under resets
     for row in rows:
         assert REQUIRED <= set(row)
         assert row["env_steps_per_s"] > 0
