@@ -104,7 +104,9 @@ def bench_observations_under_resets(variant: str, n_envs: int, device: torch.dev
     """Observation cost when every step also resets a few envs, as early in training (short
     episodes that end in crashes): each step a random `reset_fraction` of the envs restarts, and the
     builder pushes a frame for all envs and refills the stacks of the reset ones, as the TorchRL env
-    does. `observation_env_steps_per_s` counts only the builders' time."""
+    does. `observation_env_steps_per_s` counts only the builders' time; `reset_cost_vs_step` is the
+    time spent refilling the reset envs' stacks over the time of pushing one frame for all envs (a
+    ratio taken within the run, so that it holds on a busy machine)."""
     from .observations import ObservationBuilder, ObservationConfig
 
     streams = OBS_VARIANTS[variant]
@@ -113,7 +115,7 @@ def bench_observations_under_resets(variant: str, n_envs: int, device: torch.dev
     builder = ObservationBuilder(sim, obs_cfg)
     builder.reset()
     gen = torch.Generator(device=device).manual_seed(0)
-    builder_seconds: list[float] = []
+    builder_seconds: list[tuple[float, float]] = []  # (push a frame for all envs, refill the reset ones)
 
     def one_step() -> None:
         sim.step(sim.npc_actions(sim.state)[:, HOST])
@@ -122,17 +124,20 @@ def bench_observations_under_resets(variant: str, n_envs: int, device: torch.dev
         _sync(device)
         start = time.perf_counter()
         builder.step()
+        _sync(device)
+        pushed = time.perf_counter()
         builder.reset(restart)
         _sync(device)
-        builder_seconds.append(time.perf_counter() - start)
+        builder_seconds.append((pushed - start, time.perf_counter() - pushed))
 
     calls, elapsed = _timed(one_step, device, seconds)
-    spent = sum(builder_seconds[-calls:])  # without the warm-up calls
+    push, refill = (sum(t) for t in zip(*builder_seconds[-calls:], strict=True))  # without the warm-up calls
     return dict(what=f"simulator+{variant} under resets", device=str(device), n_envs=n_envs,
                 camera=streams["camera"], hgm=streams["hgm"], coordinates=streams["coordinates"],
                 image=f"{size}x{size}", frame_stack=frame_stack, reset_fraction=reset_fraction,
                 env_steps_per_s=round(calls * n_envs / elapsed, 1),
-                observation_env_steps_per_s=round(calls * n_envs / spent, 1))
+                observation_env_steps_per_s=round(calls * n_envs / (push + refill), 1),
+                reset_cost_vs_step=round(refill / push, 3))
 
 
 def _compose(*overrides: str) -> Any:

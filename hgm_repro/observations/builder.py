@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from ..simulator import HighwaySimulator
+from ..simulator import HighwaySimulator, TrafficState
 from .config import ObservationConfig
 from .coordinates import FEATURES, coordinates
 from .frame_stack import FrameStack
@@ -39,40 +39,40 @@ class ObservationBuilder:
         return out
 
     @torch.no_grad()
-    def frame(self) -> dict[str, torch.Tensor]:
-        """One frame of every stream for the current state: camera/hgm uint8 [N, 3, H, W],
-        coordinates float32 [N, K*6]."""
+    def frame(self, state: TrafficState | None = None) -> dict[str, torch.Tensor]:
+        """One frame of every stream for `state` (default: the simulator's): camera/hgm uint8
+        [N, 3, H, W], coordinates float32 [N, K*6]."""
         c, sim = self.cfg, self.sim
+        s = sim.state if state is None else state
         out: dict[str, torch.Tensor] = {}
         if c.camera == "front":
-            out["camera"] = front_camera(sim, height=c.height, width=c.width, fov_deg=c.camera_fov_deg,
+            out["camera"] = front_camera(sim, s, height=c.height, width=c.width, fov_deg=c.camera_fov_deg,
                                          camera_height=c.camera_height, max_range=c.camera_max_range)
         elif c.camera == "birdseye":
-            out["camera"] = birdseye_camera(sim, height=c.height, width=c.width, v2x_range=c.v2x_range)
+            out["camera"] = birdseye_camera(sim, s, height=c.height, width=c.width, v2x_range=c.v2x_range)
         if c.hgm != "none":
-            out["hgm"] = hyper_grid_matrix(sim, height=c.height, width=c.width, v2x_range=c.v2x_range,
+            out["hgm"] = hyper_grid_matrix(sim, s, height=c.height, width=c.width, v2x_range=c.v2x_range,
                                            variant=c.hgm, encoded=True)
         if c.coordinates:
-            out["coordinates"] = coordinates(sim, k=c.coord_k, v2x_range=c.v2x_range)
+            out["coordinates"] = coordinates(sim, s, k=c.coord_k, v2x_range=c.v2x_range)
         return out
 
     @torch.no_grad()
     def reset(self, mask: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
         """Stacked observations after `sim.reset(mask)`: the stacks of envs in `mask` (all when
-        None) are refilled with the new first frame; other envs' stacks are left as they were."""
-        frames = self.frame()
-        return {k: self.stacks[k].reset(frames[k], mask) for k in self.keys}
+        None) are refilled with the new first frame; other envs' stacks are left as they were.
+        Only the reset envs are drawn: early in training most steps reset a few of N envs."""
+        if mask is None or any(stack.stack is None for stack in self.stacks.values()):
+            frames = self.frame()
+            return {k: self.stacks[k].reset(frames[k]) for k in self.keys}
+        rows = mask.to(self.sim.device).reshape(-1).nonzero().squeeze(1)
+        if rows.numel() == 0:
+            return {k: self.stacks[k].stack for k in self.keys}
+        frames = self.frame(self.sim.state.select_envs(rows))
+        return {k: self.stacks[k].refill(rows, frames[k]) for k in self.keys}
 
     @torch.no_grad()
-    def step(self, reset_mask: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
-        """Stacked observations after `sim.step`: the newest frame is pushed onto every stack.
-        With `reset_mask`, the envs in it (reset since the last call) are refilled instead, which
-        saves a second frame computation when resets and steps happen together."""
+    def step(self) -> dict[str, torch.Tensor]:
+        """Stacked observations after `sim.step`: the newest frame is pushed onto every stack."""
         frames = self.frame()
-        out = {}
-        for k in self.keys:
-            stacked = self.stacks[k].push(frames[k])
-            if reset_mask is not None:
-                stacked = self.stacks[k].reset(frames[k], reset_mask, copy=False)
-            out[k] = stacked
-        return out
+        return {k: self.stacks[k].push(frames[k]) for k in self.keys}

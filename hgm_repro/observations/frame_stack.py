@@ -19,21 +19,23 @@ class FrameStack:
         self.stack: torch.Tensor | None = None
         self._c = 0
 
-    def reset(self, frame: torch.Tensor, mask: torch.Tensor | None = None, copy: bool = True) -> torch.Tensor:
-        """`frame` [N, C, ...]; envs where `mask` is True (all when None, or before any frame) restart.
-
-        With `copy=False` the current stack is overwritten in place: only for a stack nobody else
-        holds yet (the builder's own push-then-reset)."""
+    def reset(self, frame: torch.Tensor, mask: torch.Tensor | None = None) -> torch.Tensor:
+        """`frame` [N, C, ...]; envs where `mask` is True (all when None, or before any frame) restart."""
         if self.stack is None or mask is None or self.stack.shape[0] != frame.shape[0] \
                 or self.stack.dtype != frame.dtype or self.stack.device != frame.device:
             self._c = frame.shape[1]
             self.stack = frame.repeat(1, self.n_frames, *([1] * (frame.dim() - 2)))
             return self.stack
-        # Copy only the rows of the envs that restart (usually a few of N).
         rows = mask.to(frame.device).reshape(-1).nonzero().squeeze(1)
-        if copy:
-            self.stack = self.stack.clone()  # the caller may still hold the previous stack
-        self.stack[rows] = frame[rows].repeat(1, self.n_frames, *([1] * (frame.dim() - 2)))
+        return self.refill(rows, frame.index_select(0, rows))
+
+    def refill(self, rows: torch.Tensor, frames: torch.Tensor) -> torch.Tensor:
+        """Restart the envs in `rows` (LongTensor [R]) from their first frames `frames` [R, C, ...]."""
+        if self.stack is None:
+            raise ValueError("refill needs a stack: reset with frames of every env first")
+        # A new tensor: the caller may still hold the previous stack (the last step's observation).
+        self.stack = self.stack.clone()
+        self.stack[rows] = frames.repeat(1, self.n_frames, *([1] * (frames.dim() - 2)))
         return self.stack
 
     def push(self, frame: torch.Tensor) -> torch.Tensor:

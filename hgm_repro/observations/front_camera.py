@@ -236,8 +236,7 @@ def birdseye_camera(sim: HighwaySimulator, state: TrafficState | None = None, *,
     shown = s.active & ((rel_lon.abs() - sim.half_len_t[s.vtype]) < v2x_range)
     rank, order = paint_ranks(
         geom, rel_lon, s.pos_lat, sim.half_len_t[s.vtype], sim.half_wid_t[s.vtype], shown=shown,
-        priority=host_first_priority(rel_lon), max_half_len=float(sim.half_len_t.max()),
-        max_half_wid=float(sim.half_wid_t.max()))
+        priority=host_first_priority(rel_lon), max_half_len=sim.max_half_len, max_half_wid=sim.max_half_wid)
     k = order.shape[1]
     colour = pack_rgb(s.color.gather(1, order.unsqueeze(-1).expand(n, k, 3)).float())
     colour_by_rank = torch.cat([colour, colour.new_zeros(n, 1)], dim=1)

@@ -68,7 +68,7 @@ def hyper_grid_matrix(sim: HighwaySimulator, state: TrafficState | None = None, 
     key, order = paint_ranks(
         geom, rel_lon, s.pos_lat, sim.half_len_t[s.vtype], sim.half_wid_t[s.vtype],
         shown=v2x_senders(sim, s, v2x_range), priority=host_first_priority(rel_lon),
-        max_half_len=float(sim.half_len_t.max()), max_half_wid=float(sim.half_wid_t.max()),
+        max_half_len=sim.max_half_len, max_half_wid=sim.max_half_wid,
         payload=encode_hgm(value))
     k = order.shape[1]
     if encoded:

@@ -76,6 +76,9 @@ class HighwaySimulator:
         self.half_wid_t = table("width") / 2
         self.gap_time_t = table("lane_change_time_gap")
         self.connected_t = torch.tensor([t.connected for t in types], device=d)
+        # The largest collision box, as Python floats read once: drawing sizes its patches by it.
+        self.max_half_len = float(self.half_len_t.max())
+        self.max_half_wid = float(self.half_wid_t.max())
         probs = torch.tensor([self.scenario.ratio_of(t.name) if t.name != HOST_TYPE else 0.0 for t in types],
                              device=d)
         self.spawn_probs = probs / probs.sum()

@@ -71,6 +71,10 @@ class TrafficState:
     def to(self, device: torch.device | str) -> TrafficState:
         return TrafficState(**{k: v.to(device) for k, v in self.tensors().items()})
 
+    def select_envs(self, rows: torch.Tensor) -> TrafficState:
+        """The rows of the envs in `rows` (LongTensor), e.g. to draw only the envs that were reset."""
+        return TrafficState(**{k: v.index_select(0, rows) for k, v in self.tensors().items()})
+
     def select_env(self, index: int) -> TrafficState:
         """One env's rows (batch of 1), for rendering and debugging."""
         return TrafficState(**{k: v[index:index + 1] for k, v in self.tensors().items()})
