@@ -1,31 +1,24 @@
-"""Training checkpoints: atomic writes, and a config fingerprint that refuses the wrong checkpoint.
+"""Training checkpoints: atomic writes, and a training identity that refuses the wrong checkpoint.
 
-A checkpoint is a plain dict saved with `torch.save`. It records the *training config* (the
-parts of the composed Hydra config that change what is learned: model name and network,
-observation, learner, simulator, training traffic, seed) and its fingerprint, so that a run
-never silently continues, or evaluates, weights that came from another model or setting.
+A checkpoint is a plain dict saved with `torch.save`. It records the training identity
+(`train_key.training_config` as flat dotted keys, and its `train_key`), so that a run never
+silently continues, or evaluates, weights that came from another model or setting.
 What a checkpoint holds, and what a resume restores, is described in `hgm_repro.learner`.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
 import os
 from pathlib import Path
 from typing import Any
 
 import torch
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from .config_tree import flatten
+from .train_key import train_key, training_config
 
 CHECKPOINT_FORMAT = 1
-
-# Learner keys that change how a run is measured or run, not what it learns: they may differ
-# between a checkpoint and the run that resumes or evaluates it.
-NON_TRAINING_LEARNER_KEYS = ("test_steps", "test_envs", "log_every", "checkpoint_every", "compile",
-                             "cuda_graph", "checkpoint_buffer_max_mb", "torch_threads")
 
 # What a network's weights depend on: evaluation needs only these to match.
 ARCHITECTURE_KEYS = ("model.name", "model.network", "model.streams", "observation")
@@ -35,31 +28,9 @@ class CheckpointMismatchError(RuntimeError):
     """A checkpoint was written for another model or training config than the one asked for."""
 
 
-def _plain(node: Any) -> Any:
-    if isinstance(node, DictConfig):
-        return OmegaConf.to_container(node, resolve=True)
-    return node
-
-
-def training_config(cfg: DictConfig) -> dict[str, Any]:
-    """The parts of the root config that define a training run (flat dotted keys, plain values)."""
-    learner = {k: v for k, v in _plain(cfg.learner).items() if k not in NON_TRAINING_LEARNER_KEYS}
-    tree = {
-        "model": {"name": cfg.model.name, "network": _plain(cfg.model.get("network")),
-                  "streams": _plain(cfg.model.get("streams"))},
-        "observation": _plain(cfg.observation),
-        "learner": learner,
-        "simulator": _plain(cfg.simulator),
-        "train_scenario": _plain(cfg.train_scenario),
-        "seed": cfg.seed,
-    }
-    return flatten(tree)
-
-
-def config_fingerprint(config: dict[str, Any]) -> str:
-    """A short stable hash of a `training_config` dict."""
-    blob = json.dumps(config, sort_keys=True, default=str).encode()
-    return hashlib.sha256(blob).hexdigest()[:16]
+def recorded_training_config(cfg: DictConfig) -> dict[str, Any]:
+    """What a checkpoint records of `cfg`: its `training_config` as flat dotted keys."""
+    return flatten(training_config(cfg))
 
 
 def _differences(saved: dict[str, Any], wanted: dict[str, Any], limit: int = 8) -> str:
@@ -77,7 +48,7 @@ def check_compatible(checkpoint: dict[str, Any], cfg: DictConfig, path: Path, st
     architecture and inputs must (evaluating weights in another scenario or with other test settings).
     """
     saved = checkpoint.get("training_config", {})
-    wanted = training_config(cfg)
+    wanted = recorded_training_config(cfg)
     if not strict:
         saved = {k: v for k, v in saved.items() if k.startswith(ARCHITECTURE_KEYS)}
         wanted = {k: v for k, v in wanted.items() if k.startswith(ARCHITECTURE_KEYS)}
@@ -87,8 +58,8 @@ def check_compatible(checkpoint: dict[str, Any], cfg: DictConfig, path: Path, st
     what = "another model" if saved_model != wanted_model else "another training config"
     raise CheckpointMismatchError(
         f"checkpoint {path} is from {what}: it was trained for model '{saved_model}' "
-        f"(config fingerprint {checkpoint.get('fingerprint', '?')}), but this run is model '{wanted_model}' "
-        f"(config fingerprint {config_fingerprint(training_config(cfg))}). Differences: "
+        f"(train_key {checkpoint.get('train_key', '?')}), but this run is model '{wanted_model}' "
+        f"(train_key {train_key(cfg)}). Differences: "
         f"{_differences(saved, wanted)}. Use another checkpoint directory, or delete this checkpoint to start over.")
 
 

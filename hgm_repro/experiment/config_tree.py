@@ -1,4 +1,4 @@
-"""Nested configs as flat `a.b.c` keys: for MLflow params, checkpoint fingerprints and reports."""
+"""Nested configs as flat `a.b.c` keys: for MLflow params, checkpoints and reports."""
 
 from __future__ import annotations
 

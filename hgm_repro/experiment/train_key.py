@@ -1,7 +1,9 @@
-"""`train_key`: a short hash of everything that decides what training produces.
+"""The training identity: `training_config`, everything that decides what training produces,
+and `train_key`, its short hash.
 
 Two jobs with the same key would train the same network on the same data with the same
-seed, so the second one reuses the first one's checkpoint (train once, evaluate many).
+seed, so the second one reuses the first one's checkpoint (train once, evaluate many); a
+checkpoint records the same `training_config` and refuses to resume under another one.
 The test scenario, tracking, launcher and device are deliberately left out: they change
 where a job evaluates or how fast it runs, not what it learns.
 """
@@ -15,19 +17,17 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
-from .checkpoint import NON_TRAINING_LEARNER_KEYS
-
 # Bump when the checkpoint format or the meaning of a training config changes, so that
 # old checkpoints are not silently reused by new code.
 TRAIN_KEY_VERSION = 1
 KEY_LENGTH = 12
 
-# Learner values that only affect evaluation or bookkeeping, not the trained weights.
-# `compile` and `cuda_graph` are execution strategies like `device`. Kept in step with what a
-# checkpoint itself ignores, so that a reused checkpoint is never refused by the learner.
-LEARNER_KEYS_NOT_IN_KEY = frozenset(
+# Learner values that change how a run is measured or run, not the trained weights: they may
+# differ between a checkpoint and the run that resumes or evaluates it. `compile`, `cuda_graph`
+# and `torch_threads` are execution strategies like `device`.
+NON_TRAINING_LEARNER_KEYS = frozenset(
     {"test_steps", "test_envs", "log_every", "checkpoint_every", "compile", "cuda_graph",
-     *NON_TRAINING_LEARNER_KEYS}
+     "checkpoint_buffer_max_mb", "torch_threads"}
 )
 # Model values that name or describe the model without changing its training.
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
@@ -37,7 +37,7 @@ def training_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     """The part of the root config that training depends on, as plain resolved data."""
     root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
     model = root["model"]
-    learner = {k: v for k, v in root["learner"].items() if k not in LEARNER_KEYS_NOT_IN_KEY}
+    learner = {k: v for k, v in root["learner"].items() if k not in NON_TRAINING_LEARNER_KEYS}
     return {
         "version": TRAIN_KEY_VERSION,
         "model": {k: model[k] for k in MODEL_KEYS_IN_KEY if k in model},

@@ -18,9 +18,9 @@ run killed while writing keeps the previous checkpoint. A checkpoint holds:
 - env steps done, gradient updates done, the epsilon-greedy module (current epsilon), the PER beta
   schedule position, the target-update counter, the fractional update credit;
 - the torch / numpy / python RNG states and the simulator's generator;
-- the training config (model name and network, observation, learner, simulator, training traffic,
-  seed) and its fingerprint. A checkpoint from another model or config is refused with a message
-  naming both and listing the differing keys;
+- the training identity (`hgm_repro.experiment.train_key.training_config`: model name and network,
+  observation, learner, simulator, training traffic, seed) and its `train_key`. A checkpoint from
+  another model or config is refused with a message naming both and listing the differing keys;
 - the replay buffer, only when it is small (`learner.checkpoint_buffer_max_mb`, default 256 MB).
   A transition holds both observations of both streams in uint8: the smoke preset's buffer is
   stored, the quick preset's (about 600 MB) and the paper's (about 3.4 GB at 84x84, 4 frames) are not.

@@ -25,8 +25,9 @@ from torchrl.objectives import HardUpdate
 from tqdm import tqdm
 
 from ..envs import make_env
-from ..experiment.checkpoint import config_fingerprint, load_checkpoint, save_checkpoint, training_config
+from ..experiment.checkpoint import load_checkpoint, recorded_training_config, save_checkpoint
 from ..experiment.interrupts import raise_if_pending
+from ..experiment.train_key import train_key
 from ..networks import param_counts
 from .builders import (
     make_actor,
@@ -81,8 +82,8 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     checkpoint_dir = Path(checkpoint_dir)
     last_path, final_path = checkpoint_dir / "last.pt", checkpoint_dir / "final.pt"
     device = torch.device(cfg.device)
-    config = training_config(cfg)
-    fingerprint = config_fingerprint(config)
+    config = recorded_training_config(cfg)
+    this_train_key = train_key(cfg)
 
     resume = None
     for path in (final_path, last_path):
@@ -154,7 +155,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     def checkpoint_state(finished: bool) -> dict[str, Any]:
         small = _buffer_megabytes(buffer) <= float(L.get("checkpoint_buffer_max_mb", 256))
         return {
-            "format": 1, "model": cfg.model.name, "fingerprint": fingerprint, "training_config": config,
+            "format": 1, "model": cfg.model.name, "train_key": this_train_key, "training_config": config,
             "finished": finished, "env_steps": steps_done, "updates": updates_done, "update_credit": update_credit,
             "network": net.state_dict(), "loss": loss_module.state_dict(), "optimizer": optimizer.state_dict(),
             "exploration": exploration.state_dict(), "epsilon": float(exploration.eps),
