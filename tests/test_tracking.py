@@ -197,9 +197,15 @@ def test_non_learning_driver_only_evaluates(launch: Path) -> None:
     assert runs(launch, "train") == [] and len(runs(launch, "eval")) == 1
 
 
-def test_bad_value_stops_before_the_store_is_touched(tmp_path: Path) -> None:
+@pytest.mark.parametrize("override,says", [
+    ("learner.lr=-1", "learner.lr=-1"),
+    ("observation.height=20", "observation.height=20"),  # the builders' own rule: the conv stack needs 36
+    ("observation.camera_fov_deg=175", "camera_fov_deg"),
+    ("simulator.lanes=0", "lanes"),
+])
+def test_bad_value_stops_before_the_store_is_touched(tmp_path: Path, override: str, says: str) -> None:
     from hgm_repro.simulator.config import ConfigError
 
-    with pytest.raises(ConfigError, match="learner.lr=-1"):
-        run_job(make_cfg("learner.lr=-1"), tmp_path, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    with pytest.raises(ConfigError, match=says):
+        run_job(make_cfg(override), tmp_path, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
     assert not (tmp_path / "mlflow.db").exists() and not os.listdir(tmp_path)

@@ -3,9 +3,10 @@
 Hydra already rejects unknown config-group options (`scenario=7`, `model=nope`) and unknown
 keys (struct mode). What it cannot know is that `learner.lr=-1` or `learner.batch_size=abc`
 is nonsense: command-line values arrive as whatever YAML makes of them. `validate(cfg)`
-checks every value named here against its type and range, and the simulator and scenario
-nodes through the simulator's own validated configs, and raises one `ConfigError` listing
-every problem. Keys that a part adds and this schema does not name are left to that part.
+checks every value named here against its type and range, the observation node through the
+observation builders' `ObservationConfig`, the simulator and scenario nodes through the
+simulator's own validated configs (each rule lives once, with the part it protects), and raises
+one `ConfigError` listing every problem. Keys that a part adds and this schema does not name are left to that part.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any, Literal
 
 from omegaconf import DictConfig, OmegaConf
 
+from ..observations.config import ObservationConfig
 from ..simulator.config import ConfigError, ScenarioConfig, SimulatorConfig
 from ..simulator.loading import scenario_config, simulator_config
 
@@ -75,29 +77,10 @@ class LearnerSchema:
 
 
 @dataclass(frozen=True)
-class ObservationSchema:
-    height: int = field(metadata=ge(1))
-    width: int = field(metadata=ge(1))
-    frame_stack: int = field(metadata=ge(1))
-    v2x_range: float = field(metadata=gt(0))
-    coord_k: int = field(metadata=ge(1))
-    camera_fov_deg: float = field(metadata={"check": Check(lambda v: 0 < v < 180, "must lie in (0, 180)")})
-    camera_height: float = field(metadata=gt(0))
-    camera_max_range: float = field(metadata=gt(0))
-
-
-@dataclass(frozen=True)
-class StreamsSchema:
-    camera: Literal["front", "birdseye", "none"]
-    hgm: Literal["paper", "enriched", "none"]
-    coordinates: bool
-
-
-@dataclass(frozen=True)
 class ModelSchema:
     name: str
     learned: bool
-    streams: StreamsSchema
+    streams: dict[str, Any]  # checked by ObservationConfig, which owns the observation rules
     network: dict[str, Any] | None = None  # learned models: instantiated with `_target_`
     driver: dict[str, Any] | None = None  # non-learning hosts: instantiated with `_target_`
 
@@ -118,13 +101,14 @@ class ExperimentSchema:
 
 @dataclass(frozen=True)
 class JobConfig:
-    """What `validate` hands back: the typed parts plus the simulator's own validated configs."""
+    """What `validate` hands back: the typed parts plus the simulator's and the observation
+    builders' own validated configs."""
 
     seed: int
     device: str
     force_retrain: bool
     learner: LearnerSchema
-    observation: ObservationSchema
+    observation: ObservationConfig
     model: ModelSchema
     tracking: TrackingSchema
     experiment: ExperimentSchema
@@ -226,7 +210,6 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     errors: list[str] = []
     parts = {
         "learner": check_node(LearnerSchema, root.get("learner"), "learner", errors),
-        "observation": check_node(ObservationSchema, root.get("observation"), "observation", errors),
         "model": check_node(ModelSchema, root.get("model"), "model", errors),
         "tracking": check_node(TrackingSchema, root.get("tracking"), "tracking", errors),
         "experiment": check_node(ExperimentSchema, root.get("experiment"), "experiment", errors),
@@ -245,7 +228,14 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
             f"must be >= learner.batch_size={learner.batch_size}"
         )
 
-    # The simulator owns its rules; collect its message with the others.
+    # The observation builders and the simulator own their rules; collect their messages with the others.
+    observation = None
+    if isinstance(parts["model"], ModelSchema):
+        try:
+            observation = ObservationConfig.from_config(root.get("observation"), parts["model"].streams)
+        except ValueError as e:
+            errors.append(str(e))
+
     sim = scenario = train_scenario = None
     try:
         sim = simulator_config(root.get("simulator"))
@@ -264,5 +254,5 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
         raise ConfigError("invalid config:\n  " + "\n  ".join(errors))
     return JobConfig(
         seed=seed, device=root["device"], force_retrain=root["force_retrain"], simulator=sim,
-        scenario=scenario, train_scenario=train_scenario, **parts,
+        scenario=scenario, train_scenario=train_scenario, observation=observation, **parts,
     )
