@@ -17,17 +17,8 @@ import pandas as pd
 from mlflow import MlflowClient
 from mlflow.entities import ViewType
 
-# Metric names after the `eval/` prefix, in the order tables show them.
-EVAL_METRICS = (
-    "episode_return",
-    "avg_speed_kmh",
-    "lane_changes",
-    "overtakes",
-    "collisions",
-    "dangerous_actions",
-    "distance_m",
-)
-TAG_COLUMNS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "git_dirty")
+from hgm_repro.metrics import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
+from hgm_repro.metrics import RUN_TAGS as TAG_COLUMNS
 
 
 class EmptyStoreError(RuntimeError):

@@ -19,9 +19,7 @@ from mlflow import MlflowClient
 from mlflow.entities import Metric, Param
 
 from analysis.labels import CV_RATIO, LEARNED
-
-EPISODE_COLUMNS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions",
-                   "episode_return", "distance_m")
+from hgm_repro.metrics import REPORTED_METRICS as EPISODE_COLUMNS
 
 
 @dataclass

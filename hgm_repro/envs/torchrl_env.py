@@ -11,11 +11,10 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, OneHot, Unbounded
 from torchrl.envs import EnvBase
 
+from ..metrics import EPISODE_METRICS
 from ..observations import ObservationBuilder, ObservationConfig
 from ..simulator import N_ACTIONS, HighwaySimulator, ScenarioConfig, SimulatorConfig
 
-EPISODE_KEYS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m",
-                "episode_return", "decisions")
 REWARD_TERM_KEYS = ("speed", "collision", "dangerous", "lane_change", "overtake")
 
 
@@ -43,7 +42,7 @@ class HeterogeneousHighwayEnv(EnvBase):
                 obs[key] = Bounded(low=0, high=255, shape=(n, *shape), dtype=torch.uint8, device=d)
             else:
                 obs[key] = Unbounded(shape=(n, *shape), dtype=dtype, device=d)
-        obs["episode"] = Composite({k: Unbounded(shape=(n,), device=d) for k in EPISODE_KEYS}, shape=(n,), device=d)
+        obs["episode"] = Composite({k: Unbounded(shape=(n,), device=d) for k in EPISODE_METRICS}, shape=(n,), device=d)
         obs["reward_terms"] = Composite({k: Unbounded(shape=(n,), device=d) for k in REWARD_TERM_KEYS},
                                         shape=(n,), device=d)
         self.observation_spec = Composite(obs, shape=(n,), device=d)
@@ -65,7 +64,8 @@ class HeterogeneousHighwayEnv(EnvBase):
         self.simulator.reset(mask)
         obs = self.observations.reset(mask)
         false = torch.zeros(n, 1, dtype=torch.bool, device=self.device)
-        return TensorDict({**obs, "episode": self._zeros(EPISODE_KEYS), "reward_terms": self._zeros(REWARD_TERM_KEYS),
+        return TensorDict({**obs, "episode": self._zeros(EPISODE_METRICS),
+                           "reward_terms": self._zeros(REWARD_TERM_KEYS),
                            "done": false, "terminated": false.clone(), "truncated": false.clone()},
                           batch_size=[n], device=self.device)
 
@@ -76,7 +76,8 @@ class HeterogeneousHighwayEnv(EnvBase):
             action = action.to(torch.long).argmax(-1)
         result = self.simulator.step(action.reshape(n))
         obs = self.observations.step()
-        episode = TensorDict({k: result.episode[k].float() for k in EPISODE_KEYS}, batch_size=[n], device=self.device)
+        episode = TensorDict({k: result.episode[k].float() for k in EPISODE_METRICS}, batch_size=[n],
+                             device=self.device)
         terms = TensorDict({k: v.float() for k, v in result.terms.as_dict().items()}, batch_size=[n],
                            device=self.device)
         return TensorDict({**obs, "episode": episode, "reward_terms": terms,

@@ -25,10 +25,8 @@ from torchrl.envs.utils import ExplorationType, set_exploration_type
 from ..envs import make_env
 from ..experiment.checkpoint import load_checkpoint
 from ..experiment.interrupts import raise_if_pending
-from ..simulator import N_ACTIONS
-
-EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m",
-                   "episode_return", "decisions")
+from ..metrics import EPISODE_METRICS
+from ..simulator import N_ACTIONS, episode_metrics
 
 # Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
 # and the same for every model, so that methods meet the same traffic draws.
@@ -77,15 +75,9 @@ def _driver_policy(cfg: DictConfig, env) -> Policy:
 
 
 def _unfinished_episodes(env) -> pd.DataFrame:
-    """Metrics of the episodes in progress, from the simulator's per-episode accumulators."""
-    s = env.simulator.state
-    decisions = s.decision.float()
-    rows = {
-        "avg_speed_kmh": s.ep_speed_sum / decisions.clamp(min=1) * 3.6, "lane_changes": s.ep_lane_changes,
-        "overtakes": s.ep_overtakes, "collisions": s.ep_collisions, "dangerous_actions": s.ep_dangerous,
-        "distance_m": s.ep_distance, "episode_return": s.ep_return, "decisions": decisions,
-    }
-    return pd.DataFrame({k: v.float().cpu().numpy() for k, v in rows.items()})
+    """Metrics of the episodes in progress, by the simulator's own formulas."""
+    rows = episode_metrics(env.simulator.state)
+    return pd.DataFrame({k: rows[k].float().cpu().numpy() for k in EPISODE_METRICS})
 
 
 @torch.no_grad()

@@ -35,8 +35,6 @@ T = TypeVar("T")
 MAX_PARAM_VALUE = 500
 PARAMS_PER_BATCH = 100
 METRICS_PER_BATCH = 1000
-# Tags every job run carries (architecture.md); analysis filters on them.
-RUN_TAGS = ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty")
 PARENT_RUN_ENV = "HGM_REPRO_PARENT_RUN_ID"  # how a sweep's parent run id reaches its jobs
 
 

@@ -28,6 +28,7 @@ from ..envs import make_env
 from ..experiment.checkpoint import load_checkpoint, recorded_training_config, save_checkpoint
 from ..experiment.interrupts import raise_if_pending
 from ..experiment.train_key import train_key
+from ..metrics import TRAINING_CURVE_METRICS
 from ..networks import param_counts
 from .builders import (
     make_actor,
@@ -42,8 +43,6 @@ from .builders import (
 Log = Callable[[dict[str, float], int], None]
 logger = logging.getLogger(__name__)
 
-# Per-episode metrics logged as train/<name> (means over episodes finished since the last log).
-TRAIN_EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "episode_return", "collisions")
 
 
 class NonFiniteLossError(FloatingPointError):
@@ -168,7 +167,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     log(param_counts(net), 0)
     progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {cfg.model.name}",
                     disable=not sys.stdout.isatty(), dynamic_ncols=True)
-    episodes: dict[str, list[float]] = {k: [] for k in TRAIN_EPISODE_METRICS}
+    episodes: dict[str, list[float]] = {k: [] for k in TRAINING_CURVE_METRICS}
     losses: list[torch.Tensor] = []
     last_log_steps, last_log_time = steps_done, time.perf_counter()
     recent_speed = float("nan")
@@ -186,7 +185,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
         done = batch["next", "done"].reshape(-1)
         if done.any():
             finished = batch["next", "episode"][done]
-            for key in TRAIN_EPISODE_METRICS:
+            for key in TRAINING_CURVE_METRICS:
                 episodes[key].extend(finished[key].tolist())
             recent_speed = float(finished["avg_speed_kmh"].mean())
 
@@ -234,7 +233,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
                 logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h",
                             cfg.model.name, steps_done, total_steps, metrics["train/steps_per_s"],
                             metrics["train/epsilon"], metrics.get("train/avg_speed_kmh", float("nan")))
-            episodes = {k: [] for k in TRAIN_EPISODE_METRICS}
+            episodes = {k: [] for k in TRAINING_CURVE_METRICS}
             losses = []
             last_log_steps, last_log_time = steps_done, now
 

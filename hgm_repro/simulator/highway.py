@@ -40,6 +40,23 @@ class StepResult:
         return self.terminated | self.truncated
 
 
+def episode_metrics(state: TrafficState) -> dict[str, torch.Tensor]:
+    """The `hgm_repro.metrics.EPISODE_METRICS` of every env's episode so far, [N] each, from its accumulators
+    (what `StepResult.episode` reports where an episode ends)."""
+    decisions = state.decision.float()
+    metrics = {
+        "avg_speed_kmh": state.ep_speed_sum / decisions.clamp(min=1) * 3.6,
+        "lane_changes": state.ep_lane_changes,
+        "overtakes": state.ep_overtakes,
+        "collisions": state.ep_collisions,
+        "dangerous_actions": state.ep_dangerous,
+        "distance_m": state.ep_distance,
+        "episode_return": state.ep_return,
+        "decisions": decisions,
+    }
+    return metrics
+
+
 class HighwaySimulator:
     """Holds the parameters, the random generator and the state of `n_envs` envs."""
 
@@ -339,20 +356,9 @@ class HighwaySimulator:
         terminated = host_collision
         truncated = (decision >= c.episode_decisions) & ~terminated
         done = terminated | truncated
-        st = self.state
-        episode = {
-            "avg_speed_kmh": st.ep_speed_sum / decision.clamp(min=1) * 3.6,
-            "lane_changes": st.ep_lane_changes,
-            "overtakes": st.ep_overtakes,
-            "collisions": st.ep_collisions,
-            "dangerous_actions": st.ep_dangerous,
-            "distance_m": st.ep_distance,
-            "episode_return": st.ep_return,
-            "decisions": decision.float(),
-        }
         return StepResult(reward=reward, terms=terms, terminated=terminated, truncated=truncated & done,
                           lane_change=host_start, overtakes=n_overtakes, dangerous=dangerous,
-                          collision=host_collision, episode=episode)
+                          collision=host_collision, episode=episode_metrics(self.state))
 
     # ----------------------------------------------------------------------------------- spawning
     def _record_crashes(self, overlap: torch.Tensor, lead: torch.Tensor, hit: torch.Tensor,

@@ -1,0 +1,23 @@
+"""The names of what a run records, defined once for the simulator, the env, the learner,
+evaluation, tracking and analysis (no torch here: analysis imports it too).
+
+Episode metrics are what `HighwaySimulator.step` reports per episode (`StepResult.episode`,
+formulas in `simulator.highway.episode_metrics`); evaluation logs them as `eval/<metric>`,
+training curves as `train/<metric>`.
+"""
+
+from __future__ import annotations
+
+EPISODE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m",
+                   "episode_return", "decisions")
+
+# What the report compares between models (an episode's length in decisions is bookkeeping), in
+# the order its tables show them: the paper's objective first.
+REPORTED_METRICS = ("episode_return", *(m for m in EPISODE_METRICS if m not in ("episode_return", "decisions")))
+
+# The episode metrics a training run logs as `train/<name>` (means over the episodes finished
+# since the last log).
+TRAINING_CURVE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "episode_return", "collisions")
+
+# Tags every job run carries (architecture.md); analysis filters on them.
+RUN_TAGS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "git_dirty")
