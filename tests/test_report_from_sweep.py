@@ -1,7 +1,9 @@
-"""The whole chain on real runs: a smoke sweep writes the store, `python -m analysis` reads it."""
+"""The whole chain on real runs: a smoke sweep writes the store, `python -m analysis` reads it,
+and the report built from a bundle of that store equals the one built from the store."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -9,6 +11,7 @@ from mlflow import MlflowClient
 from pypdf import PdfReader
 
 from analysis.__main__ import main as analysis_main
+from analysis.bundle import TABLE_FILES
 from analysis.figures import image_variance
 from analysis.labels import fmt
 from analysis.report import SECTION_TITLES
@@ -23,12 +26,21 @@ def swept(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return cwd
 
 
-def test_report_from_a_real_smoke_sweep(swept: Path) -> None:
-    uri = f"sqlite:///{swept / 'mlflow.db'}"
+def _pdf_text(path: Path) -> str:
+    return " ".join(" ".join(page.extract_text() or "" for page in PdfReader(str(path)).pages).split())
+
+
+@pytest.fixture(scope="module")
+def store_report(swept: Path) -> Path:
     out = swept / "reports"
-    assert analysis_main(["--tracking-uri", uri, "--out", str(out)]) == 0
-    reader = PdfReader(str(out / "report.pdf"))
-    text = " ".join(" ".join(page.extract_text() or "" for page in reader.pages).split())
+    assert analysis_main(["--tracking-uri", f"sqlite:///{swept / 'mlflow.db'}", "--out", str(out)]) == 0
+    return out
+
+
+def test_report_from_a_real_smoke_sweep(swept: Path, store_report: Path) -> None:
+    uri = f"sqlite:///{swept / 'mlflow.db'}"
+    out = store_report
+    text = _pdf_text(out / "report.pdf")
     for title in SECTION_TITLES:
         assert title in text, title
     # Every evaluation mean in the store appears, formatted, in the report's tables.
@@ -43,3 +55,27 @@ def test_report_from_a_real_smoke_sweep(swept: Path) -> None:
     for name in ("fig5_speed", "fig_test_results"):
         assert image_variance(out / f"{name}.png") > 0
     assert "1 seed" in text  # one seed: the report says there is no interval instead of inventing one
+
+
+def test_report_from_a_bundle_of_the_real_sweep(swept: Path, store_report: Path) -> None:
+    bundle, out = swept / "bundle", swept / "reports_from_bundle"
+    uri = f"sqlite:///{swept / 'mlflow.db'}"
+    assert analysis_main(["--tracking-uri", uri, "--write-bundle", str(bundle), "--no-report"]) == 0
+    assert not out.exists()
+    (swept / "mlflow.db").rename(swept / "moved.db")  # the bundle alone must do
+    try:
+        assert analysis_main(["--bundle", str(bundle), "--out", str(out)]) == 0
+    finally:
+        (swept / "moved.db").rename(swept / "mlflow.db")
+    assert {p.name for p in bundle.iterdir()} >= {name for name, _ in TABLE_FILES.values()}
+    assert (out / "report.pdf").stat().st_size > 50_000
+    # Table 6 with its CIs, the claims and every word of the report are those the store gave.
+    for table in ("test_summary.csv", "claims.csv"):
+        assert (out / table).read_text() == (store_report / table).read_text(), table
+    assert "episode_return" in (out / "test_summary.csv").read_text()
+
+    def undated(text: str) -> str:
+        return re.sub(r"Generated \d{4}-\d\d-\d\d \d\d:\d\d", "Generated", text)
+
+    assert undated(_pdf_text(out / "report.pdf")) == undated(_pdf_text(store_report / "report.pdf"))
+    assert image_variance(out / "fig5_speed.png") > 0
