@@ -1,13 +1,9 @@
 """Hook for the report's pictures: one front-camera frame and one HGM per test scenario.
 
-The pictures come from the project's own observation code, never from the tracking store. Two
-routes are tried, in order, and any failure is turned into a note for the report instead of an
-error, because the report must still build while that code is being written or is broken:
-
-1. `hgm_repro.show.scenario_snapshot(scenario: str, seed: int) -> {"camera": img, "hgm": img}`
-   (img: HxWx3 uint8 array, or [3, H, W], or a PIL image);
-2. the documented interfaces: `HighwaySimulator` + `ObservationBuilder(sim, ObservationConfig(...))`,
-   reading `camera` and `hgm` from `.frame()` (uint8 [N, 3, H, W]).
+The pictures come from the project's own observation code (`HighwaySimulator` +
+`ObservationBuilder`, reading `camera` and `hgm` from `.frame()`), never from the tracking store.
+A failure is turned into a note for the report instead of an error, because the report must
+still build when that code is broken.
 """
 
 from __future__ import annotations
@@ -38,13 +34,6 @@ def _to_hwc(img: Any) -> np.ndarray:
     return arr.astype(np.uint8)
 
 
-def _from_show(scenario: str, seed: int) -> ScenarioPicture:
-    from hgm_repro import show  # type: ignore[attr-defined]
-
-    shot = show.scenario_snapshot(scenario, seed=seed)
-    return ScenarioPicture(scenario, _to_hwc(shot["camera"]), _to_hwc(shot["hgm"]))
-
-
 def _observation_settings() -> dict[str, Any]:
     import yaml
 
@@ -56,7 +45,7 @@ def _observation_settings() -> dict[str, Any]:
 def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
     import torch
 
-    from hgm_repro.observations import ObservationBuilder, ObservationConfig  # type: ignore[attr-defined]
+    from hgm_repro.observations import ObservationBuilder, ObservationConfig
     from hgm_repro.simulator import Action, HighwaySimulator
     from hgm_repro.simulator.loading import scenario_config, simulator_config
 
@@ -75,13 +64,11 @@ def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
 
 def scenario_pictures(scenarios: list[str], seed: int = 0) -> tuple[list[ScenarioPicture], str | None]:
     """Pictures for each scenario, or an empty list and a note saying why there are none."""
-    failures = []
-    for route in (_from_show, _from_interfaces):
-        try:
-            return [route(s, seed) for s in scenarios], None
-        except Exception as exc:  # noqa: BLE001 - any failure of code outside analysis/ means "skip"
-            failures.append(f"{route.__name__.strip('_')}: {type(exc).__name__}: {exc}"[:200])
-    return [], "Pictures skipped: the observation code could not be used (" + "; ".join(failures) + ")."
+    try:
+        return [_from_interfaces(s, seed) for s in scenarios], None
+    except Exception as exc:  # noqa: BLE001 - any failure of code outside analysis/ means "skip"
+        failure = f"{type(exc).__name__}: {exc}"[:200]
+    return [], f"Pictures skipped: the observation code could not be used ({failure})."
 
 
 def pictures_figure(pictures: list[ScenarioPicture], stem: Path) -> dict[str, Path]:

@@ -2,7 +2,7 @@
 IDM + MOBIL host the paper lacks, and a uniformly random host as the floor.
 
 Each driver has `.safety_layer` (whether the simulator's NPC safety layer and gap acceptance
-also guard the host: set it on the simulator with `attach`) and `.act(sim) -> LongTensor[N]`,
+also guard the host: set it on the simulator with `hgm_repro.simulator.driver.attach`) and `.act(sim) -> LongTensor[N]`,
 one `Action` per env, computed for all envs at once. They are built by Hydra from the
 `driver` node of conf/model/{human,idm_mobil,random}.yaml, so they take keyword arguments only.
 """
@@ -10,27 +10,15 @@ one `Action` per env, computed for all envs at once. They are built by Hydra fro
 from __future__ import annotations
 
 import dataclasses
-from typing import Protocol
 
 import torch
 
+from hgm_repro.simulator.driver import Driver, attach
 from hgm_repro.simulator.highway import HighwaySimulator
 from hgm_repro.simulator.neighbours import gather_vehicles
 from hgm_repro.simulator.state import HOST, N_ACTIONS, Action
 
 INF = float("inf")
-
-
-class Driver(Protocol):
-    safety_layer: bool
-
-    def act(self, sim: HighwaySimulator) -> torch.Tensor: ...
-
-
-def attach(driver: Driver, sim: HighwaySimulator) -> Driver:
-    """Make the simulator guard the host exactly when the driver expects it to."""
-    sim.host_safety_layer = bool(driver.safety_layer)
-    return driver
 
 
 class HumanDriver:

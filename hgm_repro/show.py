@@ -34,19 +34,6 @@ def parse_args(argv: list[str]) -> dict[str, str]:
     return args
 
 
-def top_down_panel(sim, env: int, obs_cfg) -> tuple[np.ndarray, str]:
-    """The shared top-down renderer where it exists, else this package's bird's-eye camera."""
-    try:
-        from hgm_repro.envs.render import render_top_down
-
-        return render_top_down(sim, env_index=env), "top-down view"
-    except ImportError:
-        from hgm_repro.observations import birdseye_camera
-
-        img = birdseye_camera(sim, height=obs_cfg.height, width=obs_cfg.width, v2x_range=obs_cfg.v2x_range)
-        return img[env].permute(1, 2, 0).cpu().numpy(), "bird's-eye camera"
-
-
 def main(argv: list[str] | None = None) -> Path:
     argv = sys.argv[1:] if argv is None else argv
     if any(a in ("-h", "--help", "help") for a in argv):
@@ -61,6 +48,7 @@ def main(argv: list[str] | None = None) -> Path:
     from omegaconf import OmegaConf
 
     from hgm_repro import CONF_DIR
+    from hgm_repro.envs.render import render_top_down
     from hgm_repro.observations import ObservationBuilder, ObservationConfig, decode_hgm, hyper_grid_matrix
     from hgm_repro.simulator import HOST, HighwaySimulator
     from hgm_repro.simulator.loading import scenario_config, simulator_config
@@ -70,16 +58,15 @@ def main(argv: list[str] | None = None) -> Path:
     obs_node = {**OmegaConf.to_container(root.observation), "height": int(args["height"]),
                 "width": int(args["width"])}
     obs_cfg = ObservationConfig.from_config(obs_node, {"camera": args["camera"], "hgm": args["hgm"]})
-    sim_cfg = simulator_config()
+    sim_cfg = simulator_config(host_safety_layer=True)  # the host drives by the NPC rule, under its safety layer
     sim = HighwaySimulator(sim_cfg, scenario_config(args["scenario"], sim_cfg), n_envs=env + 1,
                            seed=int(args["seed"]))
-    sim.host_safety_layer = True
     for _ in range(steps):
         sim.step(sim.npc_actions(sim.state)[:, HOST])
     frame = ObservationBuilder(sim, obs_cfg).frame()
     camera = frame["camera"][env].permute(1, 2, 0).cpu().numpy()
     hgm = decode_hgm(frame["hgm"][env, 0]).cpu().numpy()
-    top, top_title = top_down_panel(sim, env, obs_cfg)
+    top = render_top_down(sim, env_index=env)
 
     s = sim.state
     road = sim_cfg.lanes * sim_cfg.lane_width
@@ -118,7 +105,7 @@ def main(argv: list[str] | None = None) -> Path:
     ax_hgm.set_ylabel("longitudinal offset from the host (m, + ahead)")
     fig.colorbar(im, ax=ax_hgm, fraction=0.06, label="cell value (v - v_mid) / v_mid")
     ax_top.imshow(top, interpolation="nearest")
-    ax_top.set_title(top_title)
+    ax_top.set_title("top-down view")
     ax_top.axis("off")
     speed_kmh = float(s.speed[env, HOST]) * 3.6
     n_conn = int((sim.connected_t[s.vtype[env]] & s.active[env]).sum()) - 1

@@ -87,12 +87,8 @@ class HeterogeneousHighwayGymEnv(gym.Env):
 
     # ----------------------------------------------------------------------------- observations
     def _make_builder(self, observation: str, overrides: Mapping[str, Any] | None) -> Any:
-        try:
-            from ..observations import ObservationBuilder, ObservationConfig
-        except ImportError as err:
-            raise ImportError(f"observation={observation!r} needs hgm_repro.observations (ObservationBuilder, "
-                              "ObservationConfig), which could not be imported; use observation='kinematics' "
-                              "for an env without it") from err
+        from ..observations import ObservationBuilder, ObservationConfig
+
         params = {**_default_observation_params(), **dict(overrides or {})}
         streams = load_yaml("model", _STREAMS_OF[observation])["streams"]
         return ObservationBuilder(self.sim, ObservationConfig.from_config(params, streams))

@@ -5,21 +5,15 @@ from __future__ import annotations
 import importlib.util
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 import torch
 from PIL import Image
 
+from ..simulator.driver import Driver, attach
 from ..simulator.highway import HighwaySimulator
 from .render import render_top_down
-
-
-class _Driver(Protocol):
-    safety_layer: bool
-
-    def act(self, sim: HighwaySimulator) -> torch.Tensor: ...
-
 
 Policy = Callable[[HighwaySimulator], torch.Tensor]
 
@@ -59,7 +53,7 @@ def save_episode(frames: Sequence[np.ndarray], path: str | Path, fps: float = 4.
     return path
 
 
-def record_episode(sim: HighwaySimulator, driver_or_policy: _Driver | Policy, path: str | Path,
+def record_episode(sim: HighwaySimulator, driver_or_policy: Driver | Policy, path: str | Path,
                    max_decisions: int | None = None, env_index: int = 0, fps: float | None = None,
                    **render_kwargs: Any) -> dict[str, float]:
     """Reset `sim`, drive it with a driver (`.act(sim)`, its safety layer attached) or a policy
@@ -72,9 +66,7 @@ def record_episode(sim: HighwaySimulator, driver_or_policy: _Driver | Policy, pa
     """
     act: Policy
     if hasattr(driver_or_policy, "act"):
-        # What baselines.drivers.attach does, inlined: the core never imports baselines.
-        sim.host_safety_layer = bool(driver_or_policy.safety_layer)
-        act = driver_or_policy.act
+        act = attach(driver_or_policy, sim).act
     elif callable(driver_or_policy):
         act = driver_or_policy
     else:

@@ -14,7 +14,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import hydra.utils
 import pandas as pd
 import torch
 from omegaconf import DictConfig
@@ -23,10 +22,10 @@ from torch.nn import functional as F
 from torchrl.envs.utils import ExplorationType, set_exploration_type
 
 from ..envs import make_env
-from ..experiment.checkpoint import load_checkpoint
 from ..experiment.interrupts import raise_if_pending
 from ..metrics import EPISODE_METRICS
 from ..simulator import N_ACTIONS, episode_metrics
+from .policies import attached_driver, trained_network
 
 # Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
 # and the same for every model, so that methods meet the same traffic draws.
@@ -51,21 +50,13 @@ Policy = Callable[[TensorDictBase], TensorDictBase]
 
 
 def _learned_policy(cfg: DictConfig, checkpoint: Path | None, device: torch.device) -> Policy:
-    from ..learner.builders import make_actor, make_network
+    from ..learner.builders import make_actor
 
-    if checkpoint is None:
-        raise ValueError(f"model '{cfg.model.name}' is learned: evaluate() needs its checkpoint")
-    # Only the architecture must match: a model trained once is tested in every scenario.
-    state = load_checkpoint(Path(checkpoint), cfg, strict=False, map_location="cpu")
-    net = make_network(cfg)
-    net.load_state_dict(state["network"])
-    net.to(device).eval()
-    return make_actor(net).to(device)
+    return make_actor(trained_network(cfg, checkpoint, device)).to(device)
 
 
 def _driver_policy(cfg: DictConfig, env) -> Policy:
-    driver = hydra.utils.instantiate(cfg.model.driver)
-    env.simulator.host_safety_layer = bool(driver.safety_layer)
+    driver = attached_driver(cfg, env.simulator)
 
     def policy(td: TensorDictBase) -> TensorDictBase:
         action = driver.act(env.simulator)

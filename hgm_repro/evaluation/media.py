@@ -17,6 +17,7 @@ from ..envs.video import record_episode
 from ..observations import ObservationBuilder, ObservationConfig
 from ..simulator import HighwaySimulator
 from ..simulator.loading import scenario_config, simulator_config
+from .policies import attached_driver, trained_network
 
 # Film a different episode than evaluation's first one, but the same one on every run of the job.
 GIF_SEED_OFFSET = 7919
@@ -27,13 +28,7 @@ Policy = Callable[[HighwaySimulator], torch.Tensor]
 
 def greedy_policy(cfg: DictConfig, checkpoint: Path, sim: HighwaySimulator) -> Policy:
     """`sim -> actions`: argmax of the trained network over stacked observations of `sim`."""
-    from ..experiment.checkpoint import load_checkpoint
-    from ..learner.builders import make_network
-
-    device = torch.device(cfg.device)
-    net = make_network(cfg).to(device)
-    net.load_state_dict(load_checkpoint(checkpoint, cfg, strict=False)["network"])
-    net.eval()
+    net = trained_network(cfg, checkpoint, torch.device(cfg.device))
     builder = ObservationBuilder(sim, ObservationConfig.from_config(cfg.observation, cfg.model.streams))
     calls = 0
 
@@ -51,8 +46,6 @@ def greedy_policy(cfg: DictConfig, checkpoint: Path, sim: HighwaySimulator) -> P
 
 def record_gif(cfg: DictConfig, checkpoint: Path | None, path: Path) -> Path:
     """Drive one episode of `cfg.scenario` with the job's host and save it as a GIF at `path`."""
-    import hydra
-
     sim_cfg = simulator_config(cfg.simulator)
     sim = HighwaySimulator(sim_cfg, scenario_config(cfg.scenario, sim_cfg), n_envs=1,
                            device=str(cfg.device), seed=int(cfg.seed) + GIF_SEED_OFFSET)
@@ -61,6 +54,6 @@ def record_gif(cfg: DictConfig, checkpoint: Path | None, path: Path) -> Path:
             raise ValueError(f"learned model {cfg.model.name!r} has no checkpoint to film")
         host = greedy_policy(cfg, checkpoint, sim)
     else:
-        host = hydra.utils.instantiate(cfg.model.driver)
+        host = attached_driver(cfg, sim)
     record_episode(sim, host, path)
     return path
