@@ -84,7 +84,7 @@ class IdmMobilDriver:
         n, d = s.n_envs, sim.device
         v0 = cfg.v_max if self.desired_speed is None else self.desired_speed
         nb = sim.neighbours()
-        half_len, a_lon = sim.half_len_t[s.vtype], sim.a_lon_t[s.vtype]
+        half_len, a_lon = sim.half_len_by_type[s.vtype], sim.a_lon_by_type[s.vtype]
         rows = torch.arange(n, device=d)
 
         def gap(back: torch.Tensor, front: torch.Tensor) -> torch.Tensor:

@@ -108,7 +108,7 @@ def main(argv: list[str] | None = None) -> Path:
     ax_top.set_title("top-down view")
     ax_top.axis("off")
     speed_kmh = float(s.speed[env, HOST]) * 3.6
-    n_conn = int((sim.connected_t[s.vtype[env]] & s.active[env]).sum()) - 1
+    n_conn = int((sim.connected_by_type[s.vtype[env]] & s.active[env]).sum()) - 1
     fig.suptitle(f"scenario {args['scenario']}, seed {args['seed']}, env {env}, after {steps} decisions: "
                  f"host {speed_kmh:.0f} km/h in lane {int(s.target_lane[env, HOST])}; "
                  f"{n_conn} connected vehicles in the world")

@@ -45,6 +45,6 @@ def place(sim: HighwaySimulator, slot: int, lon: float, lane: int, speed: float,
 
 def calm(sim: HighwaySimulator) -> HighwaySimulator:
     """Other vehicles take no random actions (r_lon = r_lat = 0), so scripts are deterministic."""
-    sim.r_lon_t = torch.zeros_like(sim.r_lon_t)
-    sim.r_lat_t = torch.zeros_like(sim.r_lat_t)
+    sim.r_lon_by_type = torch.zeros_like(sim.r_lon_by_type)
+    sim.r_lat_by_type = torch.zeros_like(sim.r_lat_by_type)
     return sim

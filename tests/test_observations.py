@@ -70,9 +70,9 @@ def reference_hgm(sim: HighwaySimulator, env: int = 0) -> tuple[torch.Tensor, to
     for i in range(s.n_vehicles):
         vt = int(s.vtype[env, i])
         rel = s.pos_lon[env, i] - lon0
-        if not (bool(s.active[env, i]) and bool(sim.connected_t[vt]) and abs(float(rel)) < D_R):
+        if not (bool(s.active[env, i]) and bool(sim.connected_by_type[vt]) and abs(float(rel)) < D_R):
             continue
-        hl, hw = sim.half_len_t[vt], sim.half_wid_t[vt]
+        hl, hw = sim.half_len_by_type[vt], sim.half_wid_by_type[vt]
         covered = ((rows - rel).abs() < hl).view(H, 1) & ((cols - s.pos_lat[env, i]).abs() < hw).view(1, W)
         prio = -1.0 if i == HOST else abs(float(rel))
         take = covered & (prio < best)
@@ -126,7 +126,7 @@ def test_only_connected_vehicles_appear_in_traffic(scenario):
         sim.step(sim.npc_actions(sim.state)[:, HOST])
     full = hyper_grid_matrix(sim, variant="enriched")
     # Removing every non-connected vehicle must change nothing.
-    sim.state.active &= sim.connected_t[sim.state.vtype]
+    sim.state.active &= sim.connected_by_type[sim.state.vtype]
     assert torch.equal(hyper_grid_matrix(sim, variant="enriched"), full)
 
 
@@ -221,7 +221,7 @@ def test_hgm_matches_reference_on_random_states(case):
     # Only active connected vehicles (and the host) win cells.
     for slot in winner.unique().tolist():
         if slot >= 0:
-            assert bool(sim.state.active[0, slot]) and bool(sim.connected_t[sim.state.vtype[0, slot]])
+            assert bool(sim.state.active[0, slot]) and bool(sim.connected_by_type[sim.state.vtype[0, slot]])
 
 
 # ----------------------------------------------------------------------------- camera

@@ -222,7 +222,7 @@ def test_human_driven_host_keeps_npc_collisions_rare_and_vehicles_on_the_road():
         active_before = sim.state.active.clone()
         res = sim.step(sim.npc_actions(sim.state)[:, HOST])
         s = sim.state
-        hw = sim.half_wid_t[s.vtype]
+        hw = sim.half_wid_by_type[s.vtype]
         on_road = (s.pos_lat - hw >= -1e-4) & (s.pos_lat + hw <= w_road + 1e-4)
         assert bool(on_road[s.active].all())
         # Newly spawned vehicles never overlap anyone.
@@ -230,7 +230,7 @@ def test_human_driven_host_keeps_npc_collisions_rare_and_vehicles_on_the_road():
         if bool(new.any()):
             dlon = (s.pos_lon.unsqueeze(2) - s.pos_lon.unsqueeze(1)).abs()
             dlat = (s.pos_lat.unsqueeze(2) - s.pos_lat.unsqueeze(1)).abs()
-            hl = sim.half_len_t[s.vtype]
+            hl = sim.half_len_by_type[s.vtype]
             touch = (dlon < hl.unsqueeze(2) + hl.unsqueeze(1)) & (dlat < hw.unsqueeze(2) + hw.unsqueeze(1))
             touch &= s.active.unsqueeze(2) & s.active.unsqueeze(1)
             touch &= ~torch.eye(s.n_vehicles, dtype=torch.bool)

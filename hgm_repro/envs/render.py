@@ -57,10 +57,10 @@ def render_top_down(sim: HighwaySimulator, env_index: int = 0, behind: float = 6
     vtype = s.vtype[0].numpy()
     active = s.active[0].numpy()
     color = s.color[0].numpy()
-    half_len = sim.half_len_t.cpu().double().numpy()[vtype]
-    half_wid = sim.half_wid_t.cpu().double().numpy()[vtype]
-    connected = sim.connected_t.cpu().numpy()[vtype]
-    v_lat = sim.v_lat_t.cpu().double().numpy()[vtype]
+    half_len = sim.half_len_by_type.cpu().double().numpy()[vtype]
+    half_wid = sim.half_wid_by_type.cpu().double().numpy()[vtype]
+    connected = sim.connected_by_type.cpu().numpy()[vtype]
+    v_lat = sim.v_lat_by_type.cpu().double().numpy()[vtype]
     centres = sim.lane_centres.cpu().double().numpy()
 
     # Drawn at SUPERSAMPLE times the size and shrunk at the end: tilted bodies and text come

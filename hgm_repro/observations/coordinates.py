@@ -38,8 +38,8 @@ def coordinates(sim: HighwaySimulator, state: TrafficState | None = None, *, k: 
         rel_lon.gather(1, idx) / v2x_range,
         rel_lat.gather(1, idx) / road_width,
         normalised_speed(s.speed.gather(1, idx), sim.config.v_min, sim.config.v_max),
-        sim.half_len_t[s.vtype.gather(1, idx)],
-        sim.half_wid_t[s.vtype.gather(1, idx)],
+        sim.half_len_by_type[s.vtype.gather(1, idx)],
+        sim.half_wid_by_type[s.vtype.gather(1, idx)],
     ], dim=-1) * present.unsqueeze(-1)
     if kk < k:
         feats = torch.cat([feats, feats.new_zeros(n, k - kk, FEATURES)], dim=1)

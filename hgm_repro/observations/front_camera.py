@@ -132,7 +132,7 @@ def front_camera(sim: HighwaySimulator, state: TrafficState | None = None, *, he
     c = sim.config
     f = (width / 2) / math.tan(math.radians(fov_deg) / 2)
     vehicle_height = max(VEHICLE_HEIGHT, camera_height + 0.1)
-    half_len, half_wid = sim.half_len_t[s.vtype], sim.half_wid_t[s.vtype]
+    half_len, half_wid = sim.half_len_by_type[s.vtype], sim.half_wid_by_type[s.vtype]
     cam_lon = s.pos_lon[:, HOST] + half_len[:, HOST]  # [N]
     cam_lat = s.pos_lat[:, HOST]
 
@@ -233,9 +233,9 @@ def birdseye_camera(sim: HighwaySimulator, state: TrafficState | None = None, *,
                   gap_row.unsqueeze(-1) & dashed.view(1, 1, width))
 
     rel_lon = s.pos_lon - s.pos_lon[:, HOST:HOST + 1]
-    shown = s.active & ((rel_lon.abs() - sim.half_len_t[s.vtype]) < v2x_range)
+    shown = s.active & ((rel_lon.abs() - sim.half_len_by_type[s.vtype]) < v2x_range)
     rank, order = paint_ranks(
-        geom, rel_lon, s.pos_lat, sim.half_len_t[s.vtype], sim.half_wid_t[s.vtype], shown=shown,
+        geom, rel_lon, s.pos_lat, sim.half_len_by_type[s.vtype], sim.half_wid_by_type[s.vtype], shown=shown,
         priority=host_first_priority(rel_lon), max_half_len=sim.max_half_len, max_half_wid=sim.max_half_wid)
     k = order.shape[1]
     colour = pack_rgb(s.color.gather(1, order.unsqueeze(-1).expand(n, k, 3)).float())

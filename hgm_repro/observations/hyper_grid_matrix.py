@@ -43,7 +43,7 @@ def normalised_speed(speed: torch.Tensor, v_min: float, v_max: float) -> torch.T
 def v2x_senders(sim: HighwaySimulator, state: TrafficState, v2x_range: float) -> torch.Tensor:
     """[N, M] bool: vehicles whose V2X data the host receives (the host itself included)."""
     rel_lon = state.pos_lon - state.pos_lon[:, HOST:HOST + 1]
-    return sim.connected_t[state.vtype] & state.active & (rel_lon.abs() < v2x_range)
+    return sim.connected_by_type[state.vtype] & state.active & (rel_lon.abs() < v2x_range)
 
 
 def host_first_priority(rel_lon: torch.Tensor) -> torch.Tensor:
@@ -66,7 +66,7 @@ def hyper_grid_matrix(sim: HighwaySimulator, state: TrafficState | None = None, 
     rel_lon = s.pos_lon - s.pos_lon[:, HOST:HOST + 1]
     value = normalised_speed(s.speed, sim.config.v_min, sim.config.v_max).clamp(-1.0, 1.0)
     key, order = paint_ranks(
-        geom, rel_lon, s.pos_lat, sim.half_len_t[s.vtype], sim.half_wid_t[s.vtype],
+        geom, rel_lon, s.pos_lat, sim.half_len_by_type[s.vtype], sim.half_wid_by_type[s.vtype],
         shown=v2x_senders(sim, s, v2x_range), priority=host_first_priority(rel_lon),
         max_half_len=sim.max_half_len, max_half_wid=sim.max_half_wid,
         payload=encode_hgm(value))

@@ -85,17 +85,17 @@ class HighwaySimulator:
         def table(attr: str) -> torch.Tensor:
             return torch.tensor([float(getattr(t, attr)) for t in types], device=d)
 
-        self.a_lon_t = table("a_lon")
-        self.v_lat_t = table("v_lat")
-        self.r_lon_t = table("r_lon")
-        self.r_lat_t = table("r_lat")
-        self.half_len_t = table("length") / 2
-        self.half_wid_t = table("width") / 2
-        self.gap_time_t = table("lane_change_time_gap")
-        self.connected_t = torch.tensor([t.connected for t in types], device=d)
+        self.a_lon_by_type = table("a_lon")
+        self.v_lat_by_type = table("v_lat")
+        self.r_lon_by_type = table("r_lon")
+        self.r_lat_by_type = table("r_lat")
+        self.half_len_by_type = table("length") / 2
+        self.half_wid_by_type = table("width") / 2
+        self.gap_time_by_type = table("lane_change_time_gap")
+        self.connected_by_type = torch.tensor([t.connected for t in types], device=d)
         # The largest collision box, as Python floats read once: drawing sizes its patches by it.
-        self.max_half_len = float(self.half_len_t.max())
-        self.max_half_wid = float(self.half_wid_t.max())
+        self.max_half_len = float(self.half_len_by_type.max())
+        self.max_half_wid = float(self.half_wid_by_type.max())
         probs = torch.tensor([self.scenario.ratio_of(t.name) if t.name != HOST_TYPE else 0.0 for t in types],
                              device=d)
         self.spawn_probs = probs / probs.sum()
@@ -177,7 +177,7 @@ class HighwaySimulator:
 
     def neighbours(self, state: TrafficState | None = None) -> Neighbours:
         s = self.state if state is None else state
-        occ = lane_occupancy(s.pos_lat, self.half_wid_t[s.vtype], s.target_lane, s.active,
+        occ = lane_occupancy(s.pos_lat, self.half_wid_by_type[s.vtype], s.target_lane, s.active,
                              self.config.lanes, self.config.lane_width)
         return nearest_per_lane(s.pos_lon, occ)
 
@@ -186,7 +186,7 @@ class HighwaySimulator:
         longitudinal action with probability r_lon, else no action."""
         n, m = state.pos_lon.shape
         u_lat, u_lon, u_dir = self._rand(n, m), self._rand(n, m), self._rand(n, m)
-        r_lat, r_lon = self.r_lat_t[state.vtype], self.r_lon_t[state.vtype]
+        r_lat, r_lon = self.r_lat_by_type[state.vtype], self.r_lon_by_type[state.vtype]
         act = torch.full((n, m), int(Action.NO_ACTION), device=self.device, dtype=torch.long)
         lon_act = torch.where(u_dir < 0.5, int(Action.ACCELERATE), int(Action.DECELERATE))
         lat_act = torch.where(u_dir < 0.5, int(Action.LANE_LEFT), int(Action.LANE_RIGHT))
@@ -200,8 +200,8 @@ class HighwaySimulator:
         d = self.device
         host_action = host_action.to(d).reshape(n).long()
         v_min, v_max = c.v_min, c.v_max
-        half_len, half_wid = self.half_len_t[s.vtype], self.half_wid_t[s.vtype]
-        a_lon, v_lat = self.a_lon_t[s.vtype], self.v_lat_t[s.vtype]
+        half_len, half_wid = self.half_len_by_type[s.vtype], self.half_wid_by_type[s.vtype]
+        a_lon, v_lat = self.a_lon_by_type[s.vtype], self.v_lat_by_type[s.vtype]
 
         actions = self.npc_actions(s)
         actions[:, HOST] = host_action
@@ -219,18 +219,18 @@ class HighwaySimulator:
         desired = s.target_lane - wants_left.long() + wants_right.long()
         off_road = wants & ((desired < 0) | (desired >= c.lanes))
         desired_c = desired.clamp(0, c.lanes - 1)
-        lead_t = nb.lead.gather(2, desired_c.unsqueeze(-1)).squeeze(-1)
-        follow_t = nb.follow.gather(2, desired_c.unsqueeze(-1)).squeeze(-1)
-        front_gap = gather_vehicles(s.pos_lon, lead_t, INF) - s.pos_lon - half_len \
-            - gather_vehicles(half_len, lead_t, 0.0)
-        rear_gap = s.pos_lon - gather_vehicles(s.pos_lon, follow_t, -INF) - half_len \
-            - gather_vehicles(half_len, follow_t, 0.0)
-        rear_speed = gather_vehicles(s.speed, follow_t, 0.0)
-        lead_speed_t = gather_vehicles(s.speed, lead_t, INF)
-        accept_t = self.gap_time_t[s.vtype]
+        lead_in_target = nb.lead.gather(2, desired_c.unsqueeze(-1)).squeeze(-1)
+        follow_in_target = nb.follow.gather(2, desired_c.unsqueeze(-1)).squeeze(-1)
+        front_gap = gather_vehicles(s.pos_lon, lead_in_target, INF) - s.pos_lon - half_len \
+            - gather_vehicles(half_len, lead_in_target, 0.0)
+        rear_gap = s.pos_lon - gather_vehicles(s.pos_lon, follow_in_target, -INF) - half_len \
+            - gather_vehicles(half_len, follow_in_target, 0.0)
+        rear_speed = gather_vehicles(s.speed, follow_in_target, 0.0)
+        lead_speed_in_target = gather_vehicles(s.speed, lead_in_target, INF)
+        gap_time = self.gap_time_by_type[s.vtype]
         s0, tau = c.safety.min_gap, c.safety.reaction_time
-        gap_ok = (front_gap >= s0 + accept_t * s.speed + (s.speed - lead_speed_t).clamp(min=0) * tau) & \
-                 (rear_gap >= s0 + accept_t * rear_speed + (rear_speed - s.speed).clamp(min=0) * tau)
+        gap_ok = (front_gap >= s0 + gap_time * s.speed + (s.speed - lead_speed_in_target).clamp(min=0) * tau) & \
+                 (rear_gap >= s0 + gap_time * rear_speed + (rear_speed - s.speed).clamp(min=0) * tau)
         # Guarded drivers change to the left only on even decisions and to the right only on
         # odd ones, so that two of them never merge into the same lane from both sides at once.
         even = (s.decision % 2 == 0).unsqueeze(1)
@@ -348,7 +348,7 @@ class HighwaySimulator:
         if self.respawn:
             spawn_front = ~active & (left_behind | (~left_ahead & (rel <= 0)))
             st = self.state
-            occ = lane_occupancy(st.pos_lat, self.half_wid_t[st.vtype], st.target_lane, st.active, c.lanes,
+            occ = lane_occupancy(st.pos_lat, self.half_wid_by_type[st.vtype], st.target_lane, st.active, c.lanes,
                                  c.lane_width)
             self._respawn(~st.active & spawn_front, front=True, occupancy=occ)
             self._respawn(~st.active & ~spawn_front, front=False, occupancy=occ)
@@ -389,7 +389,7 @@ class HighwaySimulator:
         if not bool(candidates.any()):
             return
         candidates = candidates.clone()
-        half_len = self.half_len_t[s.vtype]
+        half_len = self.half_len_by_type[s.vtype]
         pos = s.pos_lon.unsqueeze(-1).expand_as(occupancy)
         if front:
             near_pos, near_idx = pos.masked_fill(~occupancy, -INF).max(1)  # [N, L]
@@ -407,7 +407,7 @@ class HighwaySimulator:
             slot = slot.clamp(max=m - 1)
             new_type = self._draw_types(n)
             new_speed = c.v_min + self._rand(n) * (c.v_max - c.v_min)
-            hl_new = self.half_len_t[new_type].unsqueeze(1)
+            hl_new = self.half_len_by_type[new_type].unsqueeze(1)
             # The newcomer never closes in on its neighbour: ahead of the field it drives at least
             # as fast as the vehicle behind it, behind the field at most as fast as the one ahead.
             lane_speed = (torch.maximum if front else torch.minimum)(new_speed.unsqueeze(1), near_speed)
