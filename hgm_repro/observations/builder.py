@@ -9,10 +9,11 @@ from __future__ import annotations
 import torch
 
 from ..simulator import HighwaySimulator, TrafficState
+from .birdseye_camera import birdseye_camera
 from .config import ObservationConfig
 from .coordinates import FEATURES, coordinates
 from .frame_stack import FrameStack
-from .front_camera import birdseye_camera, front_camera
+from .front_camera import front_camera
 from .hyper_grid_matrix import hyper_grid_matrix
 
 

@@ -1,6 +1,6 @@
-"""The host's RGB camera: a forward pinhole camera, or a bird's-eye view, as uint8 [N, 3, H, W].
+"""The host's forward RGB camera: a pinhole camera at the front bumper, as uint8 [N, 3, H, W].
 
-Front camera geometry: a level pinhole camera at the host's front bumper, `camera_height` above
+Geometry: a level pinhole camera at the host's front bumper, `camera_height` above
 the road, looking along the road (the host's heading during a lane change is ignored). Square
 pixels with focal length f = (W/2) / tan(fov/2), so the horizon is the image's middle row and a
 point z metres ahead, x metres to the right and y metres high lands on column W/2 + f x / z,
@@ -30,14 +30,24 @@ uses arithmetic instead of torch.where (see grid.blend).
 from __future__ import annotations
 
 import math
-import sys
 from functools import lru_cache
 
 import torch
 
 from ..simulator import HOST, HighwaySimulator, TrafficState
-from .grid import GridGeometry, blend, paint_ranks
-from .hyper_grid_matrix import hgm_geometry, host_first_priority
+from .grid import blend
+from .road_paint import (
+    DASH_LENGTH,
+    DASH_PERIOD,
+    MARKING,
+    ROAD,
+    VERGE,
+    lane_markings,
+    mix_colours,
+    pack_rgb,
+    packed_colour,
+    unpack_rgb,
+)
 
 VEHICLE_HEIGHT = 1.5  # m; must exceed the camera height for the per-column occlusion rule
 NEAR_PLANE = 0.1  # m
@@ -45,49 +55,10 @@ LAT_STEP = 0.05  # m: resolution of the host's lateral position in the backgroun
 
 SKY_TOP = (110, 160, 230)
 SKY_HORIZON = (190, 215, 240)
-ROAD = (105, 105, 110)
-VERGE = (70, 125, 60)
-MARKING = (235, 235, 235)
-DASH_PERIOD = 12.0  # m: a 4 m dash, then an 8 m gap
-DASH_LENGTH = 4.0
-MARKING_HALF_WIDTH = 0.08  # m
 # Shades of a vehicle's colour: side faces, and the band below BUMPER_TOP (bumper, tyres, shadow).
 SIDE_SHADE, BUMPER_SHADE = 0.75, 0.45
 BUMPER_TOP = 0.4  # m above the road
 
-
-def pack_rgb(rgb: torch.Tensor) -> torch.Tensor:
-    """[..., 3] colours (0..255) -> [...] int32 r | g << 8 | b << 16."""
-    c = rgb.round().clamp(0, 255).to(torch.int32)
-    return c[..., 0] | (c[..., 1] << 8) | (c[..., 2] << 16)
-
-
-def unpack_rgb(packed: torch.Tensor) -> torch.Tensor:
-    """[N, H, W] packed int32 -> [N, 3, H, W] uint8."""
-    n, h, w = packed.shape
-    if sys.byteorder == "little":
-        return packed.contiguous().view(torch.uint8).view(n, h, w, 4)[..., :3].permute(0, 3, 1, 2).contiguous()
-    return torch.stack([(packed >> s) & 255 for s in (0, 8, 16)], dim=1).to(torch.uint8)  # pragma: no cover
-
-
-def _colour(rgb: tuple[int, int, int]) -> float:
-    return float(rgb[0] | (rgb[1] << 8) | (rgb[2] << 16))
-
-
-def _markings(lat: torch.Tensor, lat_pixel: torch.Tensor, lanes: int, lane_width: float
-              ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-    """On-road, solid-line and dashed-line masks at lateral positions `lat` (m from the left road
-    edge); a marking is drawn at least one pixel (`lat_pixel` m) wide so that it never vanishes."""
-    road_width = lanes * lane_width
-    on_road = (lat >= 0) & (lat <= road_width)
-    k = torch.round(lat / lane_width).clamp(0, lanes)
-    near_line = (lat - k * lane_width).abs() <= torch.clamp(lat_pixel * 0.5, min=MARKING_HALF_WIDTH) + 1e-4
-    edge = (k == 0) | (k == lanes)
-    return on_road, near_line & edge, near_line & ~edge
-
-
-def _blend(a: tuple[int, int, int], b: tuple[int, int, int], t: float) -> tuple[int, int, int]:
-    return tuple(int(round(x * (1 - t) + y * t)) for x, y in zip(a, b, strict=True))
 
 
 @lru_cache(maxsize=8)
@@ -108,14 +79,14 @@ def _front_tables(lanes: int, lane_width: float, height: int, width: int, fov_de
     resolved = below & (footprint < DASH_PERIOD / 2)
     lat = cam_lat.view(-1, 1, 1) + (col_c / f).view(1, 1, width) * z.view(1, height, 1)
     lat_pixel = (z / f).view(1, height, 1).expand_as(lat)
-    on_road, solid, dashed = _markings(lat, lat_pixel, lanes, lane_width)
-    bg = torch.where(on_road, _colour(ROAD), _colour(VERGE))
-    bg = torch.where(solid, _colour(MARKING), bg)
+    on_road, solid, dashed = lane_markings(lat, lat_pixel, lanes, lane_width)
+    bg = torch.where(on_road, packed_colour(ROAD), packed_colour(VERGE))
+    bg = torch.where(solid, packed_colour(MARKING), bg)
     # Dashes a row cannot resolve show as a faint continuous line of their average brightness.
-    faint = _colour(_blend(ROAD, MARKING, DASH_LENGTH / DASH_PERIOD))
-    bg = torch.where(dashed, torch.where(resolved.view(1, height, 1), _colour(MARKING), faint), bg)
+    faint = packed_colour(mix_colours(ROAD, MARKING, DASH_LENGTH / DASH_PERIOD))
+    bg = torch.where(dashed, torch.where(resolved.view(1, height, 1), packed_colour(MARKING), faint), bg)
     t = (row_c.clamp(max=0) / (-height / 2))
-    sky = torch.tensor([_colour(_blend(SKY_HORIZON, SKY_TOP, float(x))) for x in t], device=device)
+    sky = torch.tensor([packed_colour(mix_colours(SKY_HORIZON, SKY_TOP, float(x))) for x in t], device=device)
     bg = torch.where(below.view(1, height, 1), bg, sky.view(1, height, 1))
     dashed = dashed & resolved.view(1, height, 1)
     # Only rows that resolve dashes can show a gap: keep the table from the first such row on.
@@ -141,7 +112,7 @@ def front_camera(sim: HighwaySimulator, state: TrafficState | None = None, *, he
                                                    float(camera_height), str(d))
     lat_index = torch.round(cam_lat / LAT_STEP).long().clamp(0, bg.shape[0] - 1)
     gap_row = resolved & (torch.remainder(cam_lon.unsqueeze(1) + z, DASH_PERIOD) >= DASH_LENGTH)  # [N, H]
-    road = torch.tensor(int(_colour(ROAD)), dtype=torch.int32, device=d)
+    road = torch.tensor(int(packed_colour(ROAD)), dtype=torch.int32, device=d)
     image = bg.index_select(0, lat_index)  # [N, H, W] packed
     gap = dashed.index_select(0, lat_index) & gap_row[:, first:].unsqueeze(-1)
     image[:, first:] = blend(image[:, first:], road, gap)
@@ -196,50 +167,4 @@ def front_camera(sim: HighwaySimulator, state: TrafficState | None = None, *, he
     band = image[:, r0:r1]
     band = blend(band, body, (rows >= top_row) & (rows < bumper_row))
     image[:, r0:r1] = blend(band, bumper, (rows >= bumper_row) & (rows < bottom_row))
-    return unpack_rgb(image)
-
-
-def birdseye_geometry(sim: HighwaySimulator, height: int, width: int, v2x_range: float) -> GridGeometry:
-    """The bird's-eye view covers exactly the HGM's area, so the two images align cell for cell."""
-    return hgm_geometry(sim, height, width, v2x_range)
-
-
-@lru_cache(maxsize=8)
-def _birdseye_tables(lanes: int, lane_width: float, height: int, width: int, v2x_range: float,
-                     device: str) -> tuple[torch.Tensor, torch.Tensor]:
-    """Background with solid markings [H, W] packed int32, and the dashed-line columns [W]."""
-    road_width = lanes * lane_width
-    geom = GridGeometry(height, width, v2x_range, v2x_range, 0.0, road_width)
-    lat = geom.col_centres(device)
-    on_road, solid, dashed = _markings(lat, torch.full_like(lat, geom.dx), lanes, lane_width)
-    row = torch.where(on_road, _colour(ROAD), _colour(VERGE))
-    row = torch.where(solid | dashed, _colour(MARKING), row)
-    return row.to(torch.int32).view(1, width).expand(height, width).contiguous(), dashed
-
-
-def birdseye_camera(sim: HighwaySimulator, state: TrafficState | None = None, *, height: int = 84,
-                    width: int = 84, v2x_range: float = 40.0) -> torch.Tensor:
-    """A top-down RGB view of the host's surroundings (every active vehicle, connected or not, in
-    its own colour; road and lane markings), uint8 [N, 3, H, W]; row 0 farthest ahead."""
-    s = sim.state if state is None else state
-    n = s.pos_lon.shape[0]
-    d = s.pos_lon.device
-    c = sim.config
-    geom = birdseye_geometry(sim, height, width, v2x_range)
-    bg, dashed = _birdseye_tables(c.lanes, float(c.lane_width), height, width, float(v2x_range), str(d))
-    lon = s.pos_lon[:, HOST:HOST + 1] + geom.row_centres(d).view(1, height)  # [N, H]
-    gap_row = torch.remainder(lon, DASH_PERIOD) >= DASH_LENGTH
-    image = blend(bg.expand(n, height, width), torch.tensor(int(_colour(ROAD)), dtype=torch.int32, device=d),
-                  gap_row.unsqueeze(-1) & dashed.view(1, 1, width))
-
-    rel_lon = s.pos_lon - s.pos_lon[:, HOST:HOST + 1]
-    shown = s.active & ((rel_lon.abs() - sim.half_len_by_type[s.vtype]) < v2x_range)
-    rank, order = paint_ranks(
-        geom, rel_lon, s.pos_lat, sim.half_len_by_type[s.vtype], sim.half_wid_by_type[s.vtype], shown=shown,
-        priority=host_first_priority(rel_lon), max_half_len=sim.max_half_len, max_half_wid=sim.max_half_wid)
-    k = order.shape[1]
-    colour = pack_rgb(s.color.gather(1, order.unsqueeze(-1).expand(n, k, 3)).float())
-    colour_by_rank = torch.cat([colour, colour.new_zeros(n, 1)], dim=1)
-    painted = colour_by_rank.gather(1, rank.long().view(n, -1)).view(n, height, width)
-    image = blend(image, painted, rank < k)
     return unpack_rgb(image)
