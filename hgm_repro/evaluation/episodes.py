@@ -1,4 +1,5 @@
-"""Test procedure: drive a fixed number of decisions in one scenario and report every episode.
+"""Test procedure: the same number of complete episodes in every test env, and every host meets
+the same traffic (see `evaluate`); one row per episode.
 
 A learned model runs its greedy policy (no exploration) from a checkpoint; a non-learning model
 (`cfg.model.learned == false`: the human-driven host, IDM + MOBIL, random) drives the host
@@ -9,7 +10,6 @@ metrics are computed identically: the env's per-episode `episode` outputs, read 
 from __future__ import annotations
 
 import math
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -17,14 +17,14 @@ from pathlib import Path
 import pandas as pd
 import torch
 from omegaconf import DictConfig
-from tensordict import TensorDictBase
+from tensordict import TensorDict, TensorDictBase
 from torch.nn import functional as F
-from torchrl.envs.utils import ExplorationType, set_exploration_type
+from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from ..envs import make_env
 from ..experiment.interrupts import raise_if_pending
 from ..metrics import EPISODE_METRICS
-from ..simulator import N_ACTIONS, episode_metrics
+from ..simulator import N_ACTIONS
 from .policies import attached_driver, trained_network
 
 # Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
@@ -34,16 +34,25 @@ EVAL_SEED_OFFSET = 100_000
 
 @dataclass
 class EvaluationResult:
-    """`episodes`: one row per episode (EPISODE_METRICS columns); `means`: `eval/<metric>` over rows.
-
-    `partial` is True when no episode finished within the test budget: the rows are then the
-    unfinished episodes so far, and their metrics cover fewer decisions than an episode.
-    """
+    """`episodes`: one row per complete episode (`env`, `episode` within the env, then the
+    EPISODE_METRICS columns); `means`: `eval/<metric>` over those rows; `decisions`: the decisions
+    the counted episodes drove."""
 
     episodes: pd.DataFrame
     means: dict[str, float] = field(default_factory=dict)
-    partial: bool = False
     decisions: int = 0
+
+
+def episodes_per_env(test_steps: int, test_envs: int, episode_decisions: int) -> int:
+    """The fair test's budget: every env drives this many complete episodes, so that the test
+    covers at least `test_steps` decisions of full-length episodes (Table 4: 200,000)."""
+    return max(1, math.ceil(test_steps / (test_envs * episode_decisions)))
+
+
+def _traffic_seed(base: int, stream: int, index: int) -> int:
+    """A seed per (test traffic, stream, index): stream 0 draws episode `index`'s initial traffic,
+    stream 1 the NPCs' random actions at decision `index`."""
+    return (base * 1_000_003 + stream * 1_000_000_007 + index * 7_919) % (2**63)
 
 
 Policy = Callable[[TensorDictBase], TensorDictBase]
@@ -65,46 +74,70 @@ def _driver_policy(cfg: DictConfig, env) -> Policy:
     return policy
 
 
-def _unfinished_episodes(env) -> pd.DataFrame:
-    """Metrics of the episodes in progress, by the simulator's own formulas."""
-    rows = episode_metrics(env.simulator.state)
-    return pd.DataFrame({k: rows[k].float().cpu().numpy() for k in EPISODE_METRICS})
-
-
 @torch.no_grad()
+def run_episodes(env, policy: Policy, episodes: int, traffic: int) -> pd.DataFrame:
+    """Drive `policy` greedily until every env of `env` has finished `episodes` complete episodes;
+    one row per counted episode (`env`, `episode`, then EPISODE_METRICS).
+
+    Every host meets the same traffic for the same `traffic` seed: episode k of env e starts from
+    the same initial traffic (its own seed per k, whenever the episode starts), and the NPCs'
+    random actions at each decision come from a seed per decision. An env whose host crashed early
+    starts its next episode earlier, so from its first crash on it meets other NPC draws. Envs that
+    have finished their episodes keep driving uncounted (the batch keeps its shape)."""
+    sim = env.simulator
+    n_envs = sim.n_envs
+    finished = torch.zeros(n_envs, dtype=torch.long, device=sim.device)
+    rows: list[pd.DataFrame] = []
+    decision = 0
+    with set_exploration_type(ExplorationType.DETERMINISTIC):
+        sim.generator.manual_seed(_traffic_seed(traffic, 0, 0))
+        td = env.reset()
+        while bool((finished < episodes).any()):
+            raise_if_pending()  # a SIGTERM stops the evaluation between steps
+            td = policy(td)
+            sim.generator.manual_seed(_traffic_seed(traffic, 1, decision))
+            td = step_mdp(env.step(td), keep_other=True, exclude_action=True)
+            decision += 1
+            done = td["done"].reshape(-1)
+            if not bool(done.any()):
+                continue
+            counted = done & (finished < episodes)
+            if bool(counted.any()):
+                metrics = td["episode"][counted]
+                rows.append(pd.DataFrame({"env": torch.nonzero(counted).squeeze(1).cpu().numpy(),
+                                          "episode": finished[counted].cpu().numpy(),
+                                          **{k: metrics[k].float().cpu().numpy() for k in EPISODE_METRICS}}))
+            finished = finished + done.long()
+            # Episode k of an env always starts from seed k's traffic, whenever it starts.
+            for k in finished[done].unique().tolist():
+                sim.generator.manual_seed(_traffic_seed(traffic, 0, k))
+                reset = env.reset(TensorDict({"_reset": (done & (finished == k)).unsqueeze(-1)}, batch_size=[n_envs],
+                                             device=env.device))
+                td.update(reset.select(*env.observation_spec.keys(), "done", "terminated", "truncated"))
+    return pd.concat(rows, ignore_index=True).sort_values(["env", "episode"], ignore_index=True)
+
+
+def episode_means(episodes: pd.DataFrame, prefix: str) -> dict[str, float]:
+    """`<prefix>/<metric>` means over the episodes, and `<prefix>/episodes`."""
+    means = {f"{prefix}/{k}": float(episodes[k].mean()) for k in EPISODE_METRICS}
+    means[f"{prefix}/episodes"] = float(len(episodes))
+    return means
+
+
 def evaluate(cfg: DictConfig, scenario_node, checkpoint: Path | None) -> EvaluationResult:
-    """Run `learner.test_steps` decisions (over `learner.test_envs` envs) in `scenario_node`'s traffic."""
+    """The fair test in `scenario_node`'s traffic: each of `learner.test_envs` envs drives the same
+    number of complete episodes (`episodes_per_env`, at least `learner.test_steps` decisions in
+    all), only complete episodes count, and every model of a seed meets the same traffic
+    (`run_episodes`)."""
     device = torch.device(cfg.device)
     if int(cfg.learner.get("torch_threads", 0)) > 0:
         torch.set_num_threads(int(cfg.learner.torch_threads))
     n_envs = int(cfg.learner.test_envs)
-    env = make_env(cfg, scenario_node, n_envs=n_envs, seed=int(cfg.seed) + EVAL_SEED_OFFSET)
-    if cfg.model.get("learned", True):
-        policy = _learned_policy(cfg, checkpoint, device)
-    else:
-        policy = _driver_policy(cfg, env)
-
-    rows: list[pd.DataFrame] = []
-    iterations = math.ceil(int(cfg.learner.test_steps) / n_envs)
-    with set_exploration_type(ExplorationType.DETERMINISTIC):
-        td = env.reset()
-        for _ in range(iterations):
-            raise_if_pending()  # a SIGTERM stops the evaluation between steps
-            td = policy(td)
-            transition, td = env.step_and_maybe_reset(td)  # td: the next step's input (reset where done)
-            done = transition["next", "done"].reshape(-1)
-            if done.any():
-                finished = transition["next", "episode"][done]
-                rows.append(pd.DataFrame({k: finished[k].float().cpu().numpy() for k in EPISODE_METRICS}))
-
-    partial = not rows
-    if partial:
-        warnings.warn(f"no episode finished in {iterations} decisions per env: reporting the unfinished ones "
-                      f"(raise learner.test_steps)", stacklevel=2)
-        rows.append(_unfinished_episodes(env))
-    episodes = pd.concat(rows, ignore_index=True)
-    means = {f"eval/{k}": float(episodes[k].mean()) for k in EPISODE_METRICS}
-    means["eval/episodes"] = float(len(episodes))
-    means["eval/partial"] = float(partial)
+    traffic = int(cfg.seed) + EVAL_SEED_OFFSET
+    env = make_env(cfg, scenario_node, n_envs=n_envs, seed=traffic)
+    policy = _learned_policy(cfg, checkpoint, device) if cfg.model.get("learned", True) else _driver_policy(cfg, env)
+    quota = episodes_per_env(int(cfg.learner.test_steps), n_envs, env.simulator.config.episode_decisions)
+    episodes = run_episodes(env, policy, quota, traffic)
     env.close()
-    return EvaluationResult(episodes=episodes, means=means, partial=partial, decisions=iterations * n_envs)
+    return EvaluationResult(episodes=episodes, means=episode_means(episodes, "eval"),
+                            decisions=int(episodes["decisions"].sum()))

@@ -72,6 +72,11 @@ class LearnerSchema:
     checkpoint_every: int = field(metadata=ge(1))
     log_every: int = field(metadata=ge(1))
     max_grad_norm: float = field(metadata=gt(0))
+    eval_every: int = field(default=0, metadata=ge(0))
+    val_envs: int = field(default=8, metadata=ge(1))
+    val_episodes: int = field(default=1, metadata=ge(1))
+    n_step: int = field(default=1, metadata=ge(1))
+    reward_scale: float = field(default=1.0, metadata=gt(0))
     compile: bool = False
     cuda_graph: bool = False
 

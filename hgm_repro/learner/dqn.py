@@ -25,6 +25,7 @@ from torchrl.objectives import HardUpdate
 from tqdm import tqdm
 
 from ..envs import make_env
+from ..evaluation.episodes import episode_means, run_episodes
 from ..experiment.checkpoint import load_checkpoint, recorded_training_config, save_checkpoint
 from ..experiment.interrupts import raise_if_pending
 from ..experiment.train_key import train_key
@@ -39,10 +40,16 @@ from .builders import (
     make_replay_buffer,
     make_update,
 )
+from .n_step import NStepReturns
 
 Log = Callable[[dict[str, float], int], None]
 logger = logging.getLogger(__name__)
 
+
+
+# Validation traffic: seeds that neither training (seed) nor testing (seed + EVAL_SEED_OFFSET) uses.
+VAL_SEED_OFFSET = 200_000
+BEST_CHECKPOINT = "best.pt"
 
 
 class NonFiniteLossError(FloatingPointError):
@@ -80,6 +87,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     L = cfg.learner
     checkpoint_dir = Path(checkpoint_dir)
     last_path, final_path = checkpoint_dir / "last.pt", checkpoint_dir / "final.pt"
+    best_path = checkpoint_dir / BEST_CHECKPOINT
     device = torch.device(cfg.device)
     config = recorded_training_config(cfg)
     this_train_key = train_key(cfg)
@@ -124,9 +132,16 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     n_batches = total_steps // frames_per_batch
     beta_schedule = LinearScheduler(buffer, "beta", final_value=float(L.per_beta_end), num_steps=n_batches)
     update = make_update(cfg, loss_module, optimizer, device)
+    n_step = NStepReturns(int(L.get("n_step", 1)), float(L.gamma))
+    reward_scale = float(L.get("reward_scale", 1.0))
 
     updates_done, update_credit = 0, 0.0
+    eval_every = int(L.get("eval_every", 0))
+    val_env = make_env(cfg, cfg.train_scenario, n_envs=int(L.get("val_envs", 8)),
+                       seed=int(cfg.seed) + VAL_SEED_OFFSET) if eval_every > 0 else None
+    best_val = -math.inf
     if resume:
+        best_val = float(resume.get("best_val_return", -math.inf))
         net.load_state_dict(resume["network"])
         loss_module.load_state_dict(resume["loss"])  # online and target weights
         optimizer.load_state_dict(resume["optimizer"])
@@ -161,8 +176,24 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
             "beta_schedule": beta_schedule.state_dict(), "beta": float(buffer.sampler.beta),
             "target_counter": target_updater.counter,
             "replay_buffer": buffer.state_dict() if small else None,
-            "rng": _rng_state(), "env_rng": env.simulator.generator.get_state(),
+            "rng": _rng_state(), "env_rng": env.simulator.generator.get_state(), "best_val_return": best_val,
         }
+
+    def validate() -> dict[str, float]:
+        """A greedy pass over `val_episodes` episodes per validation env, in the training traffic
+        drawn from validation seeds; keeps `best.pt` when the mean return is the best so far."""
+        nonlocal best_val
+        net.eval()
+        episodes = run_episodes(val_env, actor, int(L.get("val_episodes", 1)), int(cfg.seed) + VAL_SEED_OFFSET)
+        net.train()
+        metrics = episode_means(episodes, "val")
+        if metrics["val/episode_return"] > best_val:
+            best_val = metrics["val/episode_return"]
+            best = checkpoint_state(finished=False)
+            best["replay_buffer"] = None  # the weights are what best.pt is for
+            save_checkpoint(best, best_path)
+        metrics["val/best_episode_return"] = best_val
+        return metrics
 
     log(param_counts(net), 0)
     progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {cfg.model.name}",
@@ -175,12 +206,18 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     # --- the loop: collect one step of every env, store it, learn, log, checkpoint ---------------
     for batch in collector:
         raise_if_pending()  # a SIGTERM stops training here, between batches, never inside one
-        batch: TensorDictBase = batch.reshape(-1)
+        batch: TensorDictBase = batch.reshape(n_envs, -1)  # [envs, time]
         steps_before, steps_done = steps_done, steps_done + batch.numel()
         exploration.step(batch.numel())
         beta_schedule.step()
-        buffer.extend(batch.exclude("collector", "episode", "reward_terms", ("next", "episode"),
-                                    ("next", "reward_terms")))
+        transitions = batch.exclude("collector", "episode", "reward_terms", ("next", "episode"),
+                                    ("next", "reward_terms"))
+        if reward_scale != 1.0:
+            transitions.set(("next", "reward"), transitions.get(("next", "reward")) * reward_scale)
+        transitions = n_step(transitions)  # n-step windows complete n - 1 decisions later
+        if transitions is not None and transitions.numel() > 0:
+            buffer.extend(transitions.reshape(-1))
+        batch = batch.reshape(-1)
 
         done = batch["next", "done"].reshape(-1)
         if done.any():
@@ -228,6 +265,9 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
                             "train/steps_per_s": (steps_done - last_log_steps) / max(now - last_log_time, 1e-9),
                             "train/episodes": float(len(episodes["avg_speed_kmh"])),
                             "train/updates": float(updates_done)})
+            if val_env is not None and (steps_done // eval_every > steps_before // eval_every
+                                        or steps_done >= total_steps):
+                metrics.update(validate())
             log(metrics, steps_done)
             if progress.disable:  # no bar when output goes to a file: a line per log interval instead
                 logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h",
