@@ -355,6 +355,8 @@ def test_frame_stack_flat_vectors():
     ({"camera": "fisheye"}, "fisheye"), ({"hgm": "fancy"}, "fancy"), ({"height": 35}, "36"),
     ({"width": 20}, "36"), ({"frame_stack": 0}, "frame_stack"), ({"v2x_range": -1.0}, "v2x_range"),
     ({"coord_k": 0}, "coord_k"), ({"camera_fov_deg": 180.0}, "camera_fov_deg"),
+    ({"camera_pitch_deg": -5.0}, "camera_pitch_deg"), ({"camera_pitch_deg": 60.0}, "camera_pitch_deg"),
+    ({"vehicle_height": 1.1, "camera_height": 1.2}, "vehicle_height"),
 ])
 def test_config_rejects_bad_values(bad, match):
     with pytest.raises(ValueError, match=match):
@@ -429,3 +431,39 @@ def test_camera_with_no_vehicle_in_view_is_background_only():
     assert img.shape == (2, 3, H, W) and img.dtype == torch.uint8
     sky, road = img[0, :, 0, W // 2], img[0, :, H - 1, W // 2]
     assert sky[2] > sky[0] and abs(int(road[0]) - int(road[2])) < 10
+
+
+def _first_road_row(img: torch.Tensor) -> int:
+    """Index of the first row whose middle pixel is grey road rather than blue sky."""
+    mid = img[0, :, :, img.shape[-1] // 2].int()  # [3, H]
+    sky = mid[2] > mid[0] + 20
+    return int((~sky).nonzero()[0])
+
+
+@pytest.mark.parametrize("pitch", [10.0, 15.0, 25.0])
+def test_camera_pitch_moves_the_horizon_up_by_f_tan_pitch(pitch):
+    import math
+
+    sim = empty_road(make_sim())
+    level = _first_road_row(front_camera(sim, pitch_deg=0.0))
+    pitched = _first_road_row(front_camera(sim, pitch_deg=pitch))
+    f = (W / 2) / math.tan(math.radians(90.0) / 2)
+    assert level == H // 2
+    assert abs((level - pitched) - f * math.tan(math.radians(pitch))) <= 1.0
+
+
+def test_pitched_camera_keeps_a_car_ahead_upright_and_taller_cars_reach_higher():
+    sim = empty_road(make_sim())
+    place(sim, 1, 15.0, 2, "CHV")
+    low = vehicle_pixels(sim, pitch_deg=15.0, vehicle_height=1.5)[0]
+    high = vehicle_pixels(sim, pitch_deg=15.0, vehicle_height=2.5)[0]
+    cols_low, cols_high = low.any(0).nonzero().flatten(), high.any(0).nonzero().flatten()
+    assert torch.equal(cols_low, cols_high)  # the same columns: the image plane stays vertical
+    assert int(high.any(1).nonzero().min()) < int(low.any(1).nonzero().min())
+    assert int(high.any(1).nonzero().max()) == int(low.any(1).nonzero().max())  # same wheels on the road
+
+
+def test_camera_refuses_vehicles_lower_than_itself():
+    sim = empty_road(make_sim())
+    with pytest.raises(ValueError, match="vehicle_height"):
+        front_camera(sim, camera_height=1.6, vehicle_height=1.5)

@@ -48,7 +48,8 @@ class ObservationBuilder:
         out: dict[str, torch.Tensor] = {}
         if c.camera == "front":
             out["camera"] = front_camera(sim, s, height=c.height, width=c.width, fov_deg=c.camera_fov_deg,
-                                         camera_height=c.camera_height, max_range=c.camera_max_range)
+                                         camera_height=c.camera_height, pitch_deg=c.camera_pitch_deg,
+                                         vehicle_height=c.vehicle_height, max_range=c.camera_max_range)
         elif c.camera == "birdseye":
             out["camera"] = birdseye_camera(sim, s, height=c.height, width=c.width, v2x_range=c.v2x_range)
         if c.hgm != "none":

@@ -62,7 +62,9 @@ class ObservationConfig:
     v2x_range: float = 40.0  # D_r, m (Algorithm 1)
     coord_k: int = 16  # K nearest connected vehicles in the coordinate vector
     camera_fov_deg: float = 90.0  # horizontal field of view
-    camera_height: float = 1.4  # m above the road
+    camera_height: float = 1.2  # m above the road
+    camera_pitch_deg: float = 0.0  # downward aim (shifted-lens model: the horizon moves up)
+    vehicle_height: float = 1.5  # m; every vehicle's box height in the camera
     camera_max_range: float = 150.0  # m; vehicles farther ahead are not drawn
 
     def __post_init__(self) -> None:
@@ -93,6 +95,13 @@ class ObservationConfig:
                              "(a pinhole camera cannot see 180 degrees)")
         if finite_number("observation.camera_height", self.camera_height) <= 0:
             raise ValueError(f"observation.camera_height={self.camera_height} is not allowed: need > 0 (m)")
+        pitch = finite_number("observation.camera_pitch_deg", self.camera_pitch_deg)
+        if not 0.0 <= pitch <= 45.0:
+            raise ValueError(f"observation.camera_pitch_deg={pitch} is not allowed: need 0..45 degrees (down)")
+        if finite_number("observation.vehicle_height", self.vehicle_height) <= self.camera_height:
+            raise ValueError(f"observation.vehicle_height={self.vehicle_height} is not allowed: must exceed "
+                             f"camera_height={self.camera_height} (the camera's occlusion rule needs every vehicle "
+                             "to reach above the camera)")
         if finite_number("observation.camera_max_range", self.camera_max_range) <= 0:
             raise ValueError(f"observation.camera_max_range={self.camera_max_range} is not allowed: need > 0 (m)")
         if self.camera == "none" and self.hgm == "none" and not self.coordinates:

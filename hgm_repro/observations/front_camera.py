@@ -1,15 +1,18 @@
 """The host's forward RGB camera: a pinhole camera at the front bumper, as uint8 [N, 3, H, W].
 
-Geometry: a level pinhole camera at the host's front bumper, `camera_height` above
-the road, looking along the road (the host's heading during a lane change is ignored). Square
-pixels with focal length f = (W/2) / tan(fov/2), so the horizon is the image's middle row and a
-point z metres ahead, x metres to the right and y metres high lands on column W/2 + f x / z,
-row H/2 - f (y - camera_height) / z.
+Geometry: a pinhole camera at the host's front bumper, `camera_height` above the
+road, looking along the road (the host's heading during a lane change is ignored). Square pixels
+with focal length f = (W/2) / tan(fov/2). A level camera puts the horizon on the image's middle
+row and spends half the image on sky; `pitch_deg` aims the view down by that angle the way a
+view camera's shifted lens does: the image plane stays vertical (vertical edges stay vertical and
+the one-ray-per-column occlusion rule below stays exact) and the horizon moves up by
+f tan(pitch) rows. A point z metres ahead, x metres to the right and y metres high lands on
+column W/2 + f x / z, row H/2 - f tan(pitch) - f (y - camera_height) / z.
 
 Ground: every pixel below the horizon sees the road plane at z = f * camera_height / (row - H/2);
 from z and the column, its position on the road decides road / verge / lane marking.
 
-Vehicles are boxes (collision box footprint, VEHICLE_HEIGHT tall) in their own random colour,
+Vehicles are boxes (collision box footprint, `vehicle_height` tall) in their own random colour,
 which does not depend on the vehicle's type: the camera cannot tell connected vehicles apart.
 Each image column casts one ray in the road plane (a slab test against every box footprint:
 [N, M, W]) and keeps the nearest box it hits. Because every vehicle is taller than the camera,
@@ -49,7 +52,6 @@ from .road_paint import (
     unpack_rgb,
 )
 
-VEHICLE_HEIGHT = 1.5  # m; must exceed the camera height for the per-column occlusion rule
 NEAR_PLANE = 0.1  # m
 LAT_STEP = 0.05  # m: resolution of the host's lateral position in the background table
 
@@ -63,14 +65,16 @@ BUMPER_TOP = 0.4  # m above the road
 
 @lru_cache(maxsize=8)
 def _front_tables(lanes: int, lane_width: float, height: int, width: int, fov_deg: float, camera_height: float,
-                  device: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int]:
+                  horizon_shift: float, device: str
+                  ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor, int]:
     """Background per quantised lateral camera position, [L, H, W] packed int32, the mask of
     dashed-line pixels [L, H - first, W] from row `first` (the first row that resolves dashes) on,
     the ground distance of each row [H], whether a row resolves dashes [H], and `first`."""
     f = (width / 2) / math.tan(math.radians(fov_deg) / 2)
     road_width = lanes * lane_width
     cam_lat = torch.arange(0, int(round(road_width / LAT_STEP)) + 1, device=device) * LAT_STEP  # [L]
-    row_c = torch.arange(height, device=device, dtype=torch.float32) + 0.5 - height / 2
+    # Row centres measured from the horizon (positive below it).
+    row_c = torch.arange(height, device=device, dtype=torch.float32) + 0.5 - height / 2 + horizon_shift
     col_c = torch.arange(width, device=device, dtype=torch.float32) + 0.5 - width / 2
     below = row_c > 0
     z = torch.where(below, f * camera_height / row_c.clamp(min=1e-6), torch.zeros_like(row_c))
@@ -85,7 +89,7 @@ def _front_tables(lanes: int, lane_width: float, height: int, width: int, fov_de
     # Dashes a row cannot resolve show as a faint continuous line of their average brightness.
     faint = packed_colour(mix_colours(ROAD, MARKING, DASH_LENGTH / DASH_PERIOD))
     bg = torch.where(dashed, torch.where(resolved.view(1, height, 1), packed_colour(MARKING), faint), bg)
-    t = (row_c.clamp(max=0) / (-height / 2))
+    t = (row_c.clamp(max=0) / -max(height / 2 - horizon_shift, 1.0)).clamp(max=1)
     sky = torch.tensor([packed_colour(mix_colours(SKY_HORIZON, SKY_TOP, float(x))) for x in t], device=device)
     bg = torch.where(below.view(1, height, 1), bg, sky.view(1, height, 1))
     dashed = dashed & resolved.view(1, height, 1)
@@ -95,21 +99,25 @@ def _front_tables(lanes: int, lane_width: float, height: int, width: int, fov_de
 
 
 def front_camera(sim: HighwaySimulator, state: TrafficState | None = None, *, height: int = 84, width: int = 84,
-                 fov_deg: float = 90.0, camera_height: float = 1.4, max_range: float = 150.0) -> torch.Tensor:
+                 fov_deg: float = 90.0, camera_height: float = 1.2, pitch_deg: float = 0.0,
+                 vehicle_height: float = 1.5, max_range: float = 150.0) -> torch.Tensor:
     """The host's forward RGB camera, uint8 [N, 3, H, W] (see the module docstring)."""
     s = sim.state if state is None else state
     n = s.pos_lon.shape[0]
     d = s.pos_lon.device
     c = sim.config
     f = (width / 2) / math.tan(math.radians(fov_deg) / 2)
-    vehicle_height = max(VEHICLE_HEIGHT, camera_height + 0.1)
+    if vehicle_height <= camera_height:
+        raise ValueError(f"vehicle_height={vehicle_height} must exceed camera_height={camera_height}: the per-column "
+                         "occlusion rule needs every vehicle to reach above the camera")
+    horizon_shift = f * math.tan(math.radians(pitch_deg))  # rows the horizon sits above the middle row
     half_len, half_wid = sim.half_len_by_type[s.vtype], sim.half_wid_by_type[s.vtype]
     cam_lon = s.pos_lon[:, HOST] + half_len[:, HOST]  # [N]
     cam_lat = s.pos_lat[:, HOST]
 
     # --- background: table lookup by lateral position, then the dash gaps of this position.
     bg, dashed, z, resolved, first = _front_tables(c.lanes, float(c.lane_width), height, width, float(fov_deg),
-                                                   float(camera_height), str(d))
+                                                   float(camera_height), float(horizon_shift), str(d))
     lat_index = torch.round(cam_lat / LAT_STEP).long().clamp(0, bg.shape[0] - 1)
     gap_row = resolved & (torch.remainder(cam_lon.unsqueeze(1) + z, DASH_PERIOD) >= DASH_LENGTH)  # [N, H]
     road = torch.tensor(int(packed_colour(ROAD)), dtype=torch.int32, device=d)
@@ -161,9 +169,9 @@ def front_camera(sim: HighwaySimulator, state: TrafficState | None = None, *, he
     # band only (one small read-back for its bounds).
     seen = visible.unsqueeze(1)
     lo, hi = torch.stack([torch.where(seen, top_row, 1e9).min(), torch.where(seen, bottom_row, -1e9).max()]).tolist()
-    r0 = max(0, min(height, math.floor(lo + height / 2)))
-    r1 = max(r0, min(height, math.ceil(hi + height / 2)))
-    rows = (torch.arange(r0, r1, device=d, dtype=torch.float32) + 0.5 - height / 2).view(1, -1, 1)
+    r0 = max(0, min(height, math.floor(lo + height / 2 - horizon_shift)))
+    r1 = max(r0, min(height, math.ceil(hi + height / 2 - horizon_shift)))
+    rows = (torch.arange(r0, r1, device=d, dtype=torch.float32) + 0.5 - height / 2 + horizon_shift).view(1, -1, 1)
     band = image[:, r0:r1]
     band = blend(band, body, (rows >= top_row) & (rows < bumper_row))
     image[:, r0:r1] = blend(band, bumper, (rows >= bumper_row) & (rows < bottom_row))
