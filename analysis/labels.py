@@ -7,20 +7,24 @@ import math
 import pandas as pd
 
 LEARNED = ("proposed", "min", "coordinate")
-REFERENCE_HOSTS = ("human", "idm_mobil")  # drawn as horizontal lines on the training figures
-MODEL_ORDER = ("proposed", "min", "coordinate", "human", "idm_mobil", "random")
+# Drawn as horizontal lines on the training figures; idm_mobil_limits is the fair bar for a learned
+# host (the same rule inside the host's own limits, no safety layer).
+REFERENCE_HOSTS = ("human", "idm_mobil", "idm_mobil_limits")
+MODEL_ORDER = ("proposed", "min", "coordinate", "human", "idm_mobil", "idm_mobil_limits", "random")
 MODEL_LABELS = {
     "proposed": "Proposed (HGM + camera)",
     "min": "Min (camera only)",
     "coordinate": "Coordinate (V2X vector)",
     "human": "Human-driven host",
     "idm_mobil": "IDM + MOBIL host",
+    "idm_mobil_limits": "IDM + MOBIL inside the host's limits",
     "random": "Random host",
 }
 SHORT_LABELS = {"proposed": "Proposed", "min": "Min", "coordinate": "Coordinate", "human": "Human",
-                "idm_mobil": "IDM+MOBIL", "random": "Random"}
+                "idm_mobil": "IDM+MOBIL",
+                "idm_mobil_limits": "IDM+MOBIL (host limits)", "random": "Random"}
 PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "human": "#555555",
-           "idm_mobil": "#8c5fbf", "random": "#b08d57"}
+           "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "random": "#b08d57"}
 
 # Table 5: the connected-vehicle ratio of each test scenario.
 SCENARIOS = ("1", "2", "3", "4", "5")

@@ -27,7 +27,8 @@ def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
     out = hgm(tmp_path, "--help")
     assert out.returncode == 0, out.stderr
     for line in ("experiment: paper, quick, smoke", "launcher: basic, joblib", "learner: dqn",
-                 "model: coordinate, human, idm_mobil, min, proposed, random", "scenario: 1, 2, 3, 4, 5, train",
+                 "model: coordinate, human, idm_mobil, idm_mobil_limits, min, proposed, random",
+                 "scenario: 1, 2, 3, 4, 5, train",
                  "simulator: highway", "tracking: sqlite"):
         assert line in out.stdout
     for example in ("-m scenario=1,2,3,4,5 model=proposed,min,coordinate", "seed=0,1,2", "experiment=paper",

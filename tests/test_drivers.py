@@ -45,9 +45,13 @@ def test_safety_layers_follow_the_paper_notes():
 def test_hydra_configs_build_the_drivers():
     from hydra.utils import instantiate
 
-    for name, cls in (("human", HumanDriver), ("idm_mobil", IdmMobilDriver), ("random", RandomDriver)):
+    for name, cls in (("human", HumanDriver), ("idm_mobil", IdmMobilDriver), ("idm_mobil_limits", IdmMobilDriver),
+                      ("random", RandomDriver)):
         node = yaml.safe_load((CONF_DIR / "model" / f"{name}.yaml").read_text())["driver"]
         assert isinstance(instantiate(node), cls)
+    # The fair bar drives inside the host's own limits: no safety layer.
+    limits = yaml.safe_load((CONF_DIR / "model" / "idm_mobil_limits.yaml").read_text())["driver"]
+    assert not instantiate(limits).safety_layer
 
 
 def test_human_driver_uses_the_named_types_rates():

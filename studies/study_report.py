@@ -1,0 +1,107 @@
+"""Figures and tables of the learner study (studies/learner_study.py), from its MLflow store.
+
+Each run (training or evaluation) is matched to its arm through its logged config params.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import pandas as pd  # noqa: E402
+import yaml  # noqa: E402
+from hydra import compose, initialize_config_dir  # noqa: E402
+from learner_study import ARMS, ROOT  # noqa: E402
+from mlflow import MlflowClient  # noqa: E402
+from omegaconf import OmegaConf  # noqa: E402
+
+from analysis.stats import mean_ci  # noqa: E402
+
+CURVES = ("episode_return", "collisions", "avg_speed_kmh")
+RESULTS = ("episode_return", "collisions", "dangerous_actions", "avg_speed_kmh", "lane_changes", "overtakes")
+
+
+def _value(text: object) -> object:
+    """A logged param or an override's value as plain data ('0.99' -> 0.99, 'True' -> True)."""
+    value = yaml.safe_load(str(text))
+    return float(value) if isinstance(value, int | float) and not isinstance(value, bool) else value
+
+
+def arm_signatures() -> dict[str, dict[str, object]]:
+    """arm -> the value of every key any arm overrides (the quick preset's value where it does not).
+
+    Runs are matched on these values rather than on their train_key, so that runs made before a
+    config field existed (the field's absence means its default) still count."""
+    keys = sorted({o.split("=", 1)[0] for overrides in ARMS.values() for o in overrides})
+    with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
+        defaults = compose("config", overrides=["experiment=quick"])
+    base = {k: _value(OmegaConf.select(defaults, k)) for k in keys}
+    return {arm: {**base, **{o.split("=", 1)[0]: _value(o.split("=", 1)[1]) for o in overrides}}
+            for arm, overrides in ARMS.items()}
+
+
+def _arm_of(params: dict[str, str], signatures: dict[str, dict[str, object]]) -> str | None:
+    for arm, signature in signatures.items():
+        if all(_value(params[k]) == v if k in params else v == signature_default(k, signatures)
+               for k, v in signature.items()):
+            return arm
+    return None
+
+
+def signature_default(key: str, signatures: dict[str, dict[str, object]]) -> object:
+    return signatures["base"][key]
+
+
+def load(store: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
+    client = MlflowClient(tracking_uri=f"sqlite:///{store.resolve()}")
+    experiment = client.get_experiment_by_name("hgm_repro")
+    runs = client.search_runs([experiment.experiment_id], max_results=5000)
+    signatures = arm_signatures()
+    results, curves = [], []
+    for r in runs:
+        tags = r.data.tags
+        arm = _arm_of(r.data.params, signatures)
+        if r.info.status != "FINISHED" or arm is None or "seed" not in tags:
+            continue
+        seed = int(tags["seed"])
+        if tags.get("stage") == "eval":
+            results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
+        elif tags.get("stage") == "train":
+            for m in CURVES:
+                for point in client.get_metric_history(r.info.run_id, f"train/{m}"):
+                    curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step, "value": point.value})
+    return pd.DataFrame(results), pd.DataFrame(curves)
+
+
+def report(store: Path, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    results, curves = load(store)
+    results = results.drop_duplicates(["arm", "seed"], keep="first").sort_values(["arm", "seed"])
+    results.to_csv(out / "learner_study_per_seed.csv", index=False)
+    rows = []
+    for arm, grp in results.groupby("arm", sort=False):
+        row = {"arm": arm, "overrides": " ".join(ARMS[arm]) or "(quick preset)", "seeds": len(grp)}
+        for m in RESULTS:
+            est = mean_ci(grp[m].to_numpy(dtype=float))
+            row[m] = est.point
+            row[f"{m}_lo"], row[f"{m}_hi"] = est.low, est.high
+        rows.append(row)
+    summary = pd.DataFrame(rows).set_index("arm").reindex([a for a in ARMS if a in set(results["arm"])])
+    summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
+
+    fig, axes = plt.subplots(1, len(CURVES), figsize=(5 * len(CURVES), 3.8))
+    for ax, metric in zip(axes, CURVES, strict=True):
+        sel = curves[curves["metric"] == metric]
+        for arm in [a for a in ARMS if a in set(sel["arm"])]:
+            by_step = sel[sel["arm"] == arm].groupby("step")["value"]
+            mean = by_step.mean().rolling(3, min_periods=1).mean()
+            ax.plot(mean.index, mean.values, label=f"{arm} ({sel[sel['arm'] == arm]['seed'].nunique()} seeds)")
+        ax.set_xlabel("env steps")
+        ax.set_title(f"train/{metric}")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(out / "learner_study_curves.png", dpi=110)
+    print(summary[["seeds", *RESULTS]].round(2).to_string())
