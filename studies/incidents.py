@@ -57,8 +57,8 @@ def classify_collisions(sim: HighwaySimulator, before: Snapshot, action: torch.T
     if rows.numel() == 0:
         return pd.DataFrame(columns=["kind", "host_speed_kmh", "partner_speed_kmh", "gap_m", "host_action",
                                      "host_at_v_min"])
-    half_len = sim.half_len_t[before.vtype]
-    half_wid = sim.half_wid_t[before.vtype]
+    half_len = sim.half_len_by_type[before.vtype]
+    half_wid = sim.half_wid_by_type[before.vtype]
     dlon = before.pos_lon - before.pos_lon[:, HOST:HOST + 1]
     # Lateral reach of the host over the decision: its body now and at its target lane's centre.
     host_lat = torch.stack([before.pos_lat[:, HOST], sim.lane_centres[before.target_lane[:, HOST]]], 1)

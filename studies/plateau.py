@@ -33,6 +33,7 @@ from baselines.drivers import IdmMobilDriver  # noqa: E402
 from hgm_repro.learner.builders import make_network  # noqa: E402
 from hgm_repro.observations import ObservationBuilder, ObservationConfig  # noqa: E402
 from hgm_repro.simulator import HOST, HighwaySimulator  # noqa: E402
+from hgm_repro.simulator.driver import attach  # noqa: E402
 from hgm_repro.simulator.loading import scenario_config, simulator_config  # noqa: E402
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
@@ -75,8 +76,7 @@ def learned_host(cfg, checkpoint: Path, n_envs: int, decisions: int, seed: int):
 
 def rule_host(cfg, n_envs: int, decisions: int, seed: int):
     sim = make_sim(cfg, n_envs, seed)
-    sim.host_safety_layer = False  # inside the host's own Table 1 limits
-    driver = IdmMobilDriver(safety_layer=False)
+    driver = attach(IdmMobilDriver(safety_layer=False), sim)  # inside the host's own Table 1 limits
     sim.reset()
     return drive_and_classify(sim, lambda: driver.act(sim), decisions)
 
