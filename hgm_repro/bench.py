@@ -5,8 +5,10 @@
 
 Prints one JSON object per measured configuration on stdout (progress goes to stderr), with at
 least `what`, `device`, `n_envs`, `camera`, `env_steps_per_s` (and `updates_per_s` for the
-learner). With the `highway` extra installed it measures highway-env's `highway-v0` (5 lanes,
-50 vehicles) in the same run, so the ratio is taken side by side on the same machine.
+learner). The TorchRL env and the Gymnasium VectorEnv are measured side by side (N=256 by
+default; `vs_torchrl_env` on the VectorEnv's line). With the `highway` extra installed it measures
+highway-env's `highway-v0` (5 lanes, 50 vehicles) in the same run, so the ratio is taken side by
+side on the same machine.
 """
 
 from __future__ import annotations
@@ -140,6 +142,52 @@ def bench_observations_under_resets(variant: str, n_envs: int, device: torch.dev
                 reset_cost_vs_step=round(refill / push, 3))
 
 
+def bench_envs(n_envs: int, device: torch.device, seconds: float, rounds: int = 3) -> list[dict[str, Any]]:
+    """The TorchRL env (stepped as its collector does: `step_and_maybe_reset`) and the Gymnasium
+    VectorEnv (`make_vec`, numpy out) at the same batch size, with the same configs and
+    observations (the proposed model's camera + HGM, 84x84, 4 frames), random actions, autoreset.
+    They take turns over `rounds` rounds, so that a change of load on a shared machine hits both."""
+    import gymnasium as gym
+    import numpy as np
+
+    from .envs import ENV_ID
+    from .envs.torchrl_env import HeterogeneousHighwayEnv
+    from .simulator import N_ACTIONS
+
+    vec = gym.make_vec(ENV_ID, num_envs=n_envs, vectorization_mode="vector_entry_point", observation="hgm",
+                       device=device, seed=0)
+    core = vec.unwrapped.core
+    env = HeterogeneousHighwayEnv(core.sim_config, core.scenario, core.observations.builder.cfg, n_envs,
+                                  device=device, seed=0)
+    rng = np.random.default_rng(0)
+    gen = torch.Generator(device=device).manual_seed(0)
+    vec.reset(seed=0)
+    td = env.reset()
+
+    def torchrl_step() -> None:
+        nonlocal td
+        action = torch.randint(0, N_ACTIONS, (n_envs,), device=device, generator=gen)
+        td["action"] = torch.nn.functional.one_hot(action, N_ACTIONS)
+        _, td = env.step_and_maybe_reset(td)
+
+    def vector_step() -> None:
+        vec.step(rng.integers(0, N_ACTIONS, n_envs))
+
+    totals = {"torchrl env": [0, 0.0], "gymnasium vector env": [0, 0.0]}
+    for _ in range(rounds):
+        for what, fn in (("torchrl env", torchrl_step), ("gymnasium vector env", vector_step)):
+            calls, elapsed = _timed(fn, device, seconds / rounds)
+            totals[what][0] += calls
+            totals[what][1] += elapsed
+    vec.close()
+    cfg = core.observations.builder.cfg
+    rows = [dict(what=what, device=str(device), n_envs=n_envs, camera=cfg.camera, hgm=cfg.hgm,
+                 image=f"{cfg.height}x{cfg.width}", frame_stack=cfg.frame_stack,
+                 env_steps_per_s=round(calls * n_envs / elapsed, 1)) for what, (calls, elapsed) in totals.items()]
+    rows[1]["vs_torchrl_env"] = round(rows[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"], 3)
+    return rows
+
+
 def _compose(*overrides: str) -> Any:
     from hydra import compose, initialize_config_dir
 
@@ -238,13 +286,16 @@ def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[s
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hgm_repro.bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", choices=["simulator", "observations", "learner", "highway"], action="append",
+    parser.add_argument("--only", choices=["simulator", "observations", "envs", "learner", "highway"],
+                        action="append",
                         help="measure only these parts (repeatable); default: all")
     parser.add_argument("--n-envs", default="1,64,256,1024,4096",
                         help="comma-separated batch sizes for the simulator on CPU (default: %(default)s)")
     parser.add_argument("--cuda-n-envs", default="1024,8192,32768",
                         help="batch sizes for the simulator on CUDA, when a GPU is there (default: %(default)s)")
     parser.add_argument("--obs-n-envs", type=int, default=256, help="batch size for observations (%(default)s)")
+    parser.add_argument("--env-n-envs", type=int, default=256,
+                        help="batch size for the TorchRL env and the Gymnasium VectorEnv (%(default)s)")
     parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement (default: %(default)s)")
     parser.add_argument("--train-steps", type=int, default=2048,
                         help="env steps of the end-to-end training measurement (x8 on CUDA) (%(default)s)")
@@ -259,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("torchrl").setLevel(logging.WARNING)
     if args.threads:
         torch.set_num_threads(args.threads)
-    parts = set(args.only or ["simulator", "observations", "learner", "highway"])
+    parts = set(args.only or ["simulator", "observations", "envs", "learner", "highway"])
     devices = []
     if args.device in ("cpu", "all"):
         devices.append(torch.device("cpu"))
@@ -289,6 +340,10 @@ def main(argv: list[str] | None = None) -> int:
                 emit(bench_observations(variant, n, device, args.seconds))
             print(f"simulator+proposed under resets n_envs={n} on {device}...", file=sys.stderr)
             emit(bench_observations_under_resets("proposed", n, device, args.seconds))
+        if "envs" in parts:
+            print(f"torchrl env and gymnasium vector env n_envs={args.env_n_envs} on {device}...", file=sys.stderr)
+            for row in bench_envs(args.env_n_envs, device, 2 * args.seconds):
+                emit(row)
         if "learner" in parts:
             modes = ["eager", "compile", "cuda_graph"] if gpu else ["eager"]
             for mode in modes:

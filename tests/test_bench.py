@@ -27,3 +27,13 @@ def test_bench_learner_reports_updates_per_second(capsys):
     update = next(r for r in rows if r["what"] == "learner update")
     assert update["updates_per_s"] > 0 and update["batch_size"] == 64
     assert any(r["what"].startswith("learner training") and r["env_steps_per_s"] > 0 for r in rows)
+
+
+def test_bench_measures_the_torchrl_env_and_the_gymnasium_vector_env_side_by_side(capsys):
+    assert main(["--only", "envs", "--env-n-envs", "3", "--seconds", "0.05", "--device", "cpu"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert [r["what"] for r in rows] == ["torchrl env", "gymnasium vector env"]
+    for row in rows:
+        assert REQUIRED <= set(row) and row["n_envs"] == 3 and row["env_steps_per_s"] > 0
+        assert (row["camera"], row["hgm"], row["image"]) == ("front", "paper", "84x84")
+    assert rows[1]["vs_torchrl_env"] == round(rows[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"], 3)

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-from hgm_repro.envs.gym_env import ENV_ID, HeterogeneousHighwayGymEnv, register_envs
+from hgm_repro.envs import ENV_ID, HeterogeneousHighwayGymEnv, register_envs
 
 SMALL = {"height": 36, "width": 36, "frame_stack": 2}  # the smallest images the conv stack accepts
 ACTIONS = [0, 2, 4, 4, 3, 1, 4, 0, 2, 4] * 3

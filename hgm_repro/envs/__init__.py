@@ -1,14 +1,25 @@
-"""Environments over the batched simulator: TorchRL (the fast path) and Gymnasium (one env)."""
+"""Environments over the batched simulator: TorchRL (the fast path) and Gymnasium (one env, or a
+batch of them as a `gymnasium.vector.VectorEnv`).
+
+Importing this package stays cheap (no torch): `import hgm_repro` registers the Gymnasium env
+through it, and the env classes load on first use.
+"""
 
 from __future__ import annotations
 
+from importlib import import_module
 from typing import Any
 
-import torch
+from .registration import ENV_ID, register_envs
+
+_LAZY = {"HeterogeneousHighwayGymEnv": ".gym_env", "HeterogeneousHighwayVectorEnv": ".gym_vector_env",
+         "HeterogeneousHighwayEnv": ".torchrl_env"}
 
 
 def make_env(cfg: Any, scenario_node: Any, n_envs: int, seed: int) -> Any:
     """The TorchRL env for a composed Hydra root config, in the traffic of `scenario_node`."""
+    import torch
+
     from ..observations import ObservationConfig
     from ..simulator.loading import scenario_config, simulator_config
     from .torchrl_env import HeterogeneousHighwayEnv
@@ -20,8 +31,11 @@ def make_env(cfg: Any, scenario_node: Any, n_envs: int, seed: int) -> Any:
                                    seed=seed)
 
 
-from .gym_env import ENV_ID, HeterogeneousHighwayGymEnv, register_envs  # noqa: E402
+def __getattr__(name: str) -> Any:
+    if name in _LAZY:
+        return getattr(import_module(_LAZY[name], __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
-register_envs()
 
-__all__ = ["ENV_ID", "HeterogeneousHighwayGymEnv", "make_env", "register_envs"]
+__all__ = ["ENV_ID", "HeterogeneousHighwayEnv", "HeterogeneousHighwayGymEnv", "HeterogeneousHighwayVectorEnv",
+           "make_env", "register_envs"]
