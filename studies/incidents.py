@@ -6,8 +6,9 @@ crashed vehicle is respawned within that decision):
 - `follower_into_host`: the partner was behind the host and neither was changing lanes;
 - `host_lane_change`: the host was changing lanes (or started to in that decision);
 - `other_lane_change`: the partner was changing lanes into or out of the host's lane.
-For `host_into_leader` it also records whether the host could still brake (speed above v_min)
-and whether it did (its last action).
+It also records whether the host could still brake (speed above v_min), its last action, and
+what its sensors could show of the partner: connected (in the HGM) and wholly ahead of the host
+(in the front camera).
 
 Dangerous-action kinds follow the simulator's rule (Algorithm 2 reading in paper-notes):
 `off_road` (a lane change off the road), `cut_in` (a lane change leaving the new follower under
@@ -56,7 +57,7 @@ def classify_collisions(sim: HighwaySimulator, before: Snapshot, action: torch.T
     rows = torch.nonzero(collided).squeeze(1)
     if rows.numel() == 0:
         return pd.DataFrame(columns=["kind", "host_speed_kmh", "partner_speed_kmh", "gap_m", "host_action",
-                                     "host_at_v_min"])
+                                     "host_at_v_min", "partner_connected", "partner_in_camera"])
     half_len = sim.half_len_by_type[before.vtype]
     half_wid = sim.half_wid_by_type[before.vtype]
     dlon = before.pos_lon - before.pos_lon[:, HOST:HOST + 1]
@@ -86,7 +87,11 @@ def classify_collisions(sim: HighwaySimulator, before: Snapshot, action: torch.T
         v_host = float(before.speed[r, HOST])
         out.append({"kind": kind, "host_speed_kmh": v_host * 3.6, "partner_speed_kmh": float(before.speed[r, j]) * 3.6,
                     "gap_m": float(gap[r, j]), "host_action": Action(int(action[r])).name,
-                    "host_at_v_min": v_host <= sim.config.v_min + 1e-3})
+                    "host_at_v_min": v_host <= sim.config.v_min + 1e-3,
+                    # What the host's sensors could show of the partner a decision before: the HGM
+                    # only connected vehicles, the front camera only vehicles wholly ahead of it.
+                    "partner_connected": bool(sim.connected_by_type[before.vtype[r, j]]),
+                    "partner_in_camera": float(dlon[r, j] - half_len[r, j] - half_len[r, HOST]) > 0})
     return pd.DataFrame(out)
 
 
@@ -116,6 +121,7 @@ def drive_and_classify(sim: HighwaySimulator, act: Policy, decisions: int,
     collisions: list[pd.DataFrame] = []
     danger = dict.fromkeys(DANGER_KINDS, 0)
     speed_sum = 0.0
+    returns: list[float] = []  # of the episodes that ended (a crash or the time limit)
     for _ in range(decisions):
         action = act()
         before = Snapshot.of(sim)
@@ -127,6 +133,7 @@ def drive_and_classify(sim: HighwaySimulator, act: Policy, decisions: int,
             for k, v in classify_dangerous(sim, action, result.lane_change, result.dangerous, before).items():
                 danger[k] += v
         if bool(result.done.any()):
+            returns.extend(result.episode["episode_return"][result.done].tolist())
             sim.reset(result.done)
         if after_step is not None:
             after_step(result.done)
@@ -137,4 +144,6 @@ def drive_and_classify(sim: HighwaySimulator, act: Policy, decisions: int,
     rates.update({f"dangerous/{k}": v * per_episode for k, v in danger.items()})
     rates["collisions"] = len(table) * per_episode
     rates["avg_speed_kmh"] = speed_sum / (decisions * sim.n_envs) * 3.6
+    rates["episode_return"] = sum(returns) / max(len(returns), 1)
+    rates["episodes_ended"] = len(returns)
     return table, rates

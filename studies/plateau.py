@@ -172,7 +172,13 @@ def main(argv: list[str] | None = None) -> None:
                .mean().round(2).to_dict(orient="index"),
                "host_into_leader_at_v_min": float(learned_table.query("kind == 'host_into_leader'")["host_at_v_min"]
                                                   .mean()) if len(learned_table) else float("nan"),
-               "last_action_in_crashes": learned_table["host_action"].value_counts().to_dict()}
+               "last_action_in_crashes": learned_table["host_action"].value_counts().to_dict(),
+               "partner_seen_by": learned_table.assign(
+                   sensors=learned_table["partner_connected"].map({True: "HGM", False: ""}).str.cat(
+                       learned_table["partner_in_camera"].map({True: "+camera", False: ""}))
+                   .replace({"": "neither", "+camera": "camera only", "HGM+camera": "HGM and camera"}))
+               .groupby(["kind", "sensors"]).size().to_dict() if len(learned_table) else {}}
+    summary["partner_seen_by"] = {f"{k[0]}: {k[1]}": int(v) for k, v in summary["partner_seen_by"].items()}
     (a.out / "plateau_summary.json").write_text(json.dumps(summary, indent=2))
     print(json.dumps(summary, indent=2))
 
