@@ -21,3 +21,7 @@ TRAINING_CURVE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "episode
 
 # Tags every job run carries (architecture.md); analysis filters on them.
 RUN_TAGS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "git_dirty")
+
+# The validation return a training run logs (greedy episodes in the training traffic, on seeds
+# no test uses): what a hyperparameter search may optimise, unlike any `eval/` value.
+VALIDATION_RETURN = "val/episode_return"

@@ -1,29 +1,57 @@
-"""Look at what the host sees: front camera, Hyper-Grid Matrix and a top-down view at one moment.
+"""Look at what the host sees, or watch a trained host drive.
+
+Still picture (the human-like host, the NPC behaviour under the NPC safety layer): after `steps`
+decisions (default 40), one PNG of the front camera, the Hyper-Grid Matrix and a top-down view:
 
     python -m hgm_repro.show scenario=3 seed=0 [steps=40] [out=show/] [env=0] [hgm=paper|enriched]
                              [camera=front|birdseye] [height=84] [width=84]
 
-Runs the simulator for `steps` decisions with the human-like host (the NPC behaviour under the
-NPC safety layer), then writes one PNG into `out`.
+Watching a trained agent: an animation (MP4 when imageio-ffmpeg is installed, else GIF) of the learned
+host driving one episode of `scenario` (traffic drawn from `seed`), every frame showing the network's
+inputs (camera, HGM), its Q-values and the chosen action beside the top-down view:
+
+    python -m hgm_repro.show run_id=<training run id> scenario=3 seed=0 [tracking_uri=sqlite:///...]
+    python -m hgm_repro.show checkpoint=checkpoints/<train_key>/final.pt scenario=3 seed=0 [model=proposed]
+                             [steps=N] [format=auto|gif|mp4] [device=cpu] [out=show/]
+
+`run_id` is a training run in the MLflow store (`./mlflow.db` unless `tracking_uri` says otherwise; an
+evaluation run stands for its training); the network, observation and simulator settings come from it.
+With `checkpoint`, they come from the checkpoint; `model` (default: the checkpoint's) must match it.
+`steps` limits the decisions filmed (default: one whole episode); the animation has steps + 1 frames.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
 
 USAGE = __doc__
 
-DEFAULTS: dict[str, str] = {"scenario": "train", "seed": "0", "steps": "40", "out": "show", "env": "0",
-                            "hgm": "paper", "camera": "front", "height": "84", "width": "84"}
+DEFAULTS: dict[str, str] = {"scenario": "train", "seed": "0", "steps": "", "out": "show", "env": "0",
+                            "hgm": "paper", "camera": "front", "height": "84", "width": "84",
+                            "run_id": "", "checkpoint": "", "model": "", "tracking_uri": "", "format": "auto",
+                            "device": "cpu"}
+STILL_ONLY = ("env", "hgm", "camera", "height", "width")
+WATCH_ONLY = ("run_id", "checkpoint", "model", "tracking_uri", "format", "device")
+STILL_STEPS = 40
+
+
+class WatchError(SystemExit):
+    """What stops a watch, in one line (no traceback): a missing run, a checkpoint of another model."""
+
+    def __init__(self, message: str) -> None:
+        super().__init__(f"hgm_repro.show: {message}")
 
 
 def parse_args(argv: list[str]) -> dict[str, str]:
     """key=value pairs over DEFAULTS; unknown keys fail with the list of allowed ones."""
     args = dict(DEFAULTS)
+    given = set()
     for item in argv:
         if "=" not in item:
             raise SystemExit(f"expected key=value, got {item!r}\n{USAGE}")
@@ -31,6 +59,14 @@ def parse_args(argv: list[str]) -> dict[str, str]:
         if key not in DEFAULTS:
             raise SystemExit(f"unknown argument {key!r}; allowed: {sorted(DEFAULTS)}")
         args[key] = value
+        given.add(key)
+    watching = bool(args["run_id"] or args["checkpoint"])
+    if args["run_id"] and args["checkpoint"]:
+        raise SystemExit("give run_id= or checkpoint=, not both")
+    wrong = sorted(given & set(STILL_ONLY if watching else WATCH_ONLY[2:]))
+    if wrong:
+        mode = "watching (run_id= or checkpoint=)" if watching else "a still picture (no run_id= or checkpoint=)"
+        raise SystemExit(f"{', '.join(wrong)} do(es) not apply to {mode}")
     return args
 
 
@@ -40,7 +76,13 @@ def main(argv: list[str] | None = None) -> Path:
         print(USAGE)
         raise SystemExit(0)
     args = parse_args(argv)
+    if args["run_id"] or args["checkpoint"]:
+        return watch(args)
+    return still(args)
 
+
+def still(args: dict[str, str]) -> Path:
+    """The still picture of the human-like host's view after `steps` decisions."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -48,12 +90,12 @@ def main(argv: list[str] | None = None) -> Path:
     from omegaconf import OmegaConf
 
     from hgm_repro import CONF_DIR
-    from hgm_repro.envs.render import render_top_down
+    from hgm_repro.envs.render import hgm_colour_limit, render_top_down
     from hgm_repro.observations import ObservationBuilder, ObservationConfig, decode_hgm, hyper_grid_matrix
     from hgm_repro.simulator import HOST, HighwaySimulator
     from hgm_repro.simulator.loading import scenario_config, simulator_config
 
-    env, steps = int(args["env"]), int(args["steps"])
+    env, steps = int(args["env"]), int(args["steps"] or STILL_STEPS)
     root = OmegaConf.load(CONF_DIR / "config.yaml")
     obs_node = {**OmegaConf.to_container(root.observation), "height": int(args["height"]),
                 "width": int(args["width"])}
@@ -86,8 +128,7 @@ def main(argv: list[str] | None = None) -> Path:
     ax_cam.set_xlabel("column (px)")
     ax_cam.set_ylabel("row (px)")
     # Values of vehicles within [v_min, v_max] lie in +-(v_max - v_mid) / v_mid; scale the colours to that.
-    v_mid = (sim_cfg.v_max + sim_cfg.v_min) / 2
-    lim = (sim_cfg.v_max - v_mid) / v_mid
+    lim = hgm_colour_limit(sim_cfg)
     extent = (0, road, -d, d)
     im = ax_hgm.imshow(hgm, cmap="RdBu_r", vmin=-lim, vmax=lim, extent=extent, aspect="auto",
                        interpolation="nearest")
@@ -120,6 +161,119 @@ def main(argv: list[str] | None = None) -> Path:
     plt.close(fig)
     print(path)
     return path
+
+
+def watch(args: dict[str, str]) -> Path:
+    """An animation of a trained host driving one episode; the path it was written to."""
+    from omegaconf import open_dict
+
+    from hgm_repro.evaluation.media import record_gif
+    from hgm_repro.experiment.checkpoint import CheckpointMismatchError
+
+    if args["run_id"]:
+        cfg, checkpoint = _from_run(args["run_id"], args["tracking_uri"])
+    else:
+        checkpoint = Path(args["checkpoint"])
+        cfg = _from_checkpoint(checkpoint, args["model"])
+    with open_dict(cfg):
+        cfg.scenario = _scenario_node(args["scenario"])
+        cfg.device = args["device"]
+    fmt = args["format"]
+    if fmt == "auto":
+        fmt = "mp4" if importlib.util.find_spec("imageio_ffmpeg") is not None else "gif"
+    if fmt not in ("gif", "mp4"):
+        raise WatchError(f"format={fmt!r}: use gif, mp4 or auto")
+    out = Path(args["out"]) / (f"watch_{cfg.model.name}_seed{cfg.seed}_scenario{args['scenario']}"
+                               f"_traffic{args['seed']}.{fmt}")
+    try:
+        metrics = record_gif(cfg, checkpoint, out, seed=int(args["seed"]), panels=True,
+                             max_decisions=int(args["steps"]) if args["steps"] else None)
+    except CheckpointMismatchError as error:
+        raise WatchError(f"{error}\nTo watch this checkpoint, leave model= out (it names its own model).") from None
+    print(f"{out}: {int(metrics.get('decisions', 0))} decisions, {metrics.get('avg_speed_kmh', 0):.1f} km/h, "
+          f"return {metrics.get('episode_return', 0):.2f}, collisions {int(metrics.get('collisions', 0))}")
+    return out
+
+
+def _scenario_node(name: str) -> Any:
+    from omegaconf import OmegaConf
+
+    from hgm_repro import CONF_DIR
+
+    path = CONF_DIR / "scenario" / f"{name}.yaml"
+    if not path.is_file():
+        names = sorted(p.stem for p in (CONF_DIR / "scenario").glob("*.yaml"))
+        raise WatchError(f"no scenario {name!r}; choose one of {names}")
+    return OmegaConf.load(path)
+
+
+def _from_run(run_id: str, tracking_uri: str) -> tuple[Any, Path]:
+    """The config and final checkpoint of a training run (an evaluation run stands for its training)."""
+    import tempfile
+
+    from omegaconf import OmegaConf
+
+    from hgm_repro.experiment.job import local_checkpoint
+    from hgm_repro.experiment.tracking import Tracker, resolve_location
+
+    location = resolve_location({"uri": tracking_uri or None}, Path.cwd())
+    db = location.tracking_uri.removeprefix("sqlite:///")
+    if location.tracking_uri.startswith("sqlite:///") and not Path(db).is_file():
+        raise WatchError(f"no MLflow store at {db}: start from the directory the jobs ran in, or give tracking_uri=")
+    tracker = Tracker(location, "hgm_repro")
+    run = tracker.get_run(run_id)
+    if run is None:
+        raise WatchError(f"no run {run_id!r} in {location.tracking_uri}")
+    if run.data.tags.get("stage") == "eval":
+        if not run.data.tags.get("train_run_id"):
+            raise WatchError(f"run {run_id} evaluated a non-learning host ({run.data.tags.get('model')}): "
+                             "there is no trained network to watch")
+        run = tracker.get_run(run.data.tags["train_run_id"])
+        if run is None:
+            raise WatchError(f"the training run of evaluation run {run_id} is gone from {location.tracking_uri}")
+    if run.data.tags.get("stage") != "train":
+        raise WatchError(f"run {run_id} is not a training run (stage={run.data.tags.get('stage')!r})")
+    scratch = Path(tempfile.mkdtemp(prefix="hgm_watch_"))
+    config = tracker.download(run.info.run_id, "config.yaml", scratch)
+    checkpoint = local_checkpoint(tracker, run, scratch)
+    if checkpoint is None:
+        raise WatchError(f"training run {run.info.run_id} has no checkpoint left, on disk or in the store")
+    return OmegaConf.load(config), checkpoint
+
+
+def _from_checkpoint(path: Path, model: str) -> Any:
+    """The job config of `model` (default: the checkpoint's own) with the checkpoint's recorded
+    observation and simulator settings; the network is checked against it when it loads."""
+    from hydra import compose, initialize_config_dir
+    from omegaconf import OmegaConf, open_dict
+
+    from hgm_repro import CONF_DIR
+    from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint
+
+    if not path.is_file():
+        raise WatchError(f"no checkpoint at {path}")
+    try:
+        state = load_checkpoint(path)
+    except CheckpointMismatchError as error:
+        raise WatchError(str(error)) from None
+    recorded: dict[str, Any] = {}
+    for key, value in state.get("training_config", {}).items():
+        node = recorded
+        *parents, leaf = key.split(".")
+        for part in parents:
+            node = node.setdefault(part, {})
+        node[leaf] = value
+    name = model or state.get("model") or recorded.get("model", {}).get("name")
+    if not (CONF_DIR / "model" / f"{name}.yaml").is_file():
+        raise WatchError(f"no model {name!r} in {CONF_DIR / 'model'}")
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        cfg = compose("config", overrides=[f"model={name}"])
+    with open_dict(cfg):
+        for part in ("observation", "simulator"):
+            if part in recorded:
+                cfg[part] = OmegaConf.merge(cfg[part], recorded[part])
+        cfg.seed = int(recorded.get("seed", cfg.seed))
+    return cfg
 
 
 if __name__ == "__main__":

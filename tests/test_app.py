@@ -107,3 +107,17 @@ def test_cluster_launcher_presets(tmp_path: Path, preset: str, plugin: str, targ
     out = hgm(tmp_path, f"launcher={preset}", "--cfg", "hydra")
     assert out.returncode == 0, out.stderr
     assert yaml.safe_load(out.stdout)["hydra"]["launcher"]["_target_"].startswith("hydra_plugins")
+
+
+def test_optuna_preset_tunes_learner_values_on_the_training_traffic(tmp_path: Path) -> None:
+    text = (CONF_DIR / "hparams_search" / "optuna_val.yaml").read_text()
+    assert text.startswith("# @package _global_")
+    if importlib.util.find_spec("hydra_plugins.hydra_optuna_sweeper") is None:
+        pytest.skip("hydra-optuna-sweeper is not installed (pip install '.[optuna]')")
+    out = hgm(tmp_path, "hparams_search=optuna_val", "--cfg", "all")
+    assert out.returncode == 0, out.stderr
+    composed = yaml.safe_load(out.stdout)
+    sweeper = composed["hydra"]["sweeper"]
+    assert sweeper["_target_"].endswith("OptunaSweeper") and sweeper["direction"] == "maximize"
+    assert set(sweeper["params"]) == {"learner.lr", "learner.n_step"}
+    assert composed["scenario"]["name"] == "train"  # trials never look at a test scenario

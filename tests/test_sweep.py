@@ -72,11 +72,23 @@ def check_sweep(launch: Path, trainings: int, evaluations: int) -> list:
     for run in train:
         assert run.data.tags["scenario"] == "train"
         assert any(k.startswith("train/") for k in run.data.metrics), run.data.metrics
-        assert any(k.startswith("params/") for k in run.data.metrics)
+        assert "params/total" in run.data.params and not any(k.startswith("params/") for k in run.data.metrics)
         names = {a.path for a in client.list_artifacts(run.info.run_id)}
         assert "config.yaml" in names
-        assert [a.path for a in client.list_artifacts(run.info.run_id, "checkpoint")] == ["checkpoint/final.pt"]
+        saved = [a.path for a in client.list_artifacts(run.info.run_id, "checkpoint")]
+        assert saved in (["checkpoint/final.pt"], ["checkpoint/best.pt", "checkpoint/final.pt"])
+    # The parent run: named by its sweep directory, described, and holding the grid's means.
+    parent = parents[0]
+    assert parent.info.run_name.startswith("sweep ") and "A sweep" in parent.data.tags["mlflow.note.content"]
+    grid = {(r.data.tags["model"], r.data.tags["scenario"]) for r in evals}
+    for model, scenario in grid:
+        returns = [r.data.metrics["eval/episode_return"] for r in evals
+                   if (r.data.tags["model"], r.data.tags["scenario"]) == (model, scenario)]
+        assert parent.data.metrics[f"grid/{model}/scenario{scenario}/episode_return"] == pytest.approx(
+            sum(returns) / len(returns), rel=1e-5)
     for run in evals:
+        assert run.info.run_name == (f"{run.data.tags['model']} seed{run.data.tags['seed']} "
+                                     f"scenario{run.data.tags['scenario']} eval")
         for metric in EVAL_METRICS:
             assert metric in run.data.metrics, (metric, run.data.metrics)
         names = {a.path for a in client.list_artifacts(run.info.run_id)}
@@ -134,3 +146,25 @@ def test_killed_training_resumes_into_one_finished_run(tmp_path: Path, sig: sign
     assert train.data.tags["resumes"] == "1"
     (evaluation,) = by_stage(runs, "eval")
     assert evaluation.info.status == "FINISHED" and evaluation.data.tags["train_run_id"] == train.info.run_id
+
+
+
+VALIDATION_IN_LEARNER = "eval_every" in (CONF_DIR / "learner" / "dqn.yaml").read_text()
+
+
+@pytest.mark.skipif(not VALIDATION_IN_LEARNER, reason="the learner has no validation (learner.eval_every) yet")
+def test_optuna_preset_tunes_on_the_validation_return(tmp_path: Path) -> None:
+    import yaml
+    from mlflow.tracking import MlflowClient
+
+    pytest.importorskip("hydra_plugins.hydra_optuna_sweeper", reason="pip install '.[optuna]'")
+    hgm(tmp_path, "-m", "hparams_search=optuna_val", "experiment=smoke", "hydra.sweeper.n_trials=2",
+        "hydra.sweeper.sampler.n_startup_trials=2", "learner.eval_every=128", "tracking.log_gif=false")
+    runs = store_runs(tmp_path)
+    train, evals = by_stage(runs, "train"), by_stage(runs, "eval")
+    assert len(train) == 2 and {r.data.tags["scenario"] for r in evals} == {"train"}  # no test scenario seen
+    client = MlflowClient(tracking_uri=f"sqlite:///{tmp_path.resolve()}/mlflow.db")
+    best_val = max(max(m.value for m in client.get_metric_history(r.info.run_id, "val/episode_return"))
+                   for r in train)
+    (results,) = (tmp_path / "multirun").rglob("optimization_results.yaml")
+    assert yaml.safe_load(results.read_text())["best_value"] == pytest.approx(best_val)

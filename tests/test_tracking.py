@@ -15,13 +15,16 @@ from omegaconf import DictConfig
 from hgm_repro import CONF_DIR
 from hgm_repro.experiment.interrupts import JobInterrupted
 from hgm_repro.experiment.job import RUN_ID_FILE, run_job
-from hgm_repro.experiment.tracking import Tracker, flatten, git_info, resolve_location, retry
+from hgm_repro.experiment.schema import validate
+from hgm_repro.experiment.tracking import Tracker, flatten, git_info, resolve_location, retry, tidy_number
 from hgm_repro.experiment.train_key import train_key
+from hgm_repro.simulator.config import ConfigError
 
 
 def make_cfg(*overrides: str) -> DictConfig:
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return compose("config", overrides=["experiment=smoke", "tracking.log_gif=false", *overrides])
+        return compose("config", overrides=["experiment=smoke", "tracking.log_gif=false", "tracking.log_model=false",
+                                            *overrides])
 
 
 @pytest.fixture(scope="module")
@@ -209,3 +212,101 @@ def test_bad_value_stops_before_the_store_is_touched(tmp_path: Path, override: s
     with pytest.raises(ConfigError, match=says):
         run_job(make_cfg(override), tmp_path, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
     assert not (tmp_path / "mlflow.db").exists() and not os.listdir(tmp_path)
+
+
+class ValidatingLearner(FakeLearner):
+    """Like the learner with validation on: logs `val/episode_return`, keeps best.pt at its best."""
+
+    def __init__(self, returns: tuple[float, ...] = (3.0, 7.5, 5.0), keep_best: bool = True) -> None:
+        super().__init__()
+        self.returns, self.keep_best = returns, keep_best
+
+    def __call__(self, cfg: DictConfig, checkpoint_dir: Path, log) -> Path:
+        for step, value in enumerate(self.returns, start=1):
+            log({"val/episode_return": value}, 64 * step)
+        if self.keep_best:
+            (checkpoint_dir / "best.pt").write_text("best weights")
+        return super().__call__(cfg, checkpoint_dir, log)
+
+
+class RecordingEvaluate:
+    def __init__(self) -> None:
+        self.checkpoints: list[Path | None] = []
+
+    def __call__(self, cfg: DictConfig, scenario, checkpoint: Path | None) -> SimpleNamespace:
+        self.checkpoints.append(checkpoint)
+        return fake_evaluate(cfg, scenario, checkpoint)
+
+
+VALIDATION_ON = "learner.eval_every=64"
+
+
+def test_job_returns_the_best_validation_return_never_the_test_return(launch: Path) -> None:
+    outcome = run_job(make_cfg("scenario='3'", VALIDATION_ON), launch, train_fn=ValidatingLearner(),
+                      evaluate_fn=fake_evaluate)
+    assert outcome.validation_return == 7.5  # the best of 3.0, 7.5, 5.0; the test return is 11.0
+    assert outcome.means["eval/episode_return"] == 11.0
+    # A reused training gives the same value, read from its run in the store.
+    again = run_job(make_cfg("scenario='5'", VALIDATION_ON), launch, train_fn=ValidatingLearner(),
+                    evaluate_fn=fake_evaluate)
+    assert again.training.how == "reused" and again.validation_return == 7.5
+    # Without validation there is nothing to hand a sweeper.
+    plain = run_job(make_cfg("scenario='3'", "seed=4", "learner.eval_every=0"), launch, train_fn=FakeLearner(),
+                    evaluate_fn=fake_evaluate)
+    assert plain.validation_return is None
+
+
+def test_eval_checkpoint_best_evaluates_best_pt(launch: Path) -> None:
+    evaluate = RecordingEvaluate()
+    final = run_job(make_cfg(VALIDATION_ON), launch, train_fn=ValidatingLearner(), evaluate_fn=evaluate)
+    best = run_job(make_cfg(VALIDATION_ON, "eval.checkpoint=best"), launch, train_fn=ValidatingLearner(),
+                   evaluate_fn=evaluate)
+    assert [c.name for c in evaluate.checkpoints] == ["final.pt", "best.pt"]
+    assert best.training.run_id == final.training.run_id  # the same training, another file of it
+    tags = store(launch).get_run(best.eval_run_id).data.tags
+    assert tags["checkpoint"] == "best"
+    names = [a.path for a in store(launch).client.list_artifacts(final.training.run_id, "checkpoint")]
+    assert names == ["checkpoint/best.pt", "checkpoint/final.pt"]
+
+
+def test_eval_checkpoint_best_without_best_pt_fails_clearly(launch: Path) -> None:
+    with pytest.raises(ConfigError, match="eval.checkpoint=best is not allowed with learner.eval_every=0"):
+        validate(make_cfg("eval.checkpoint=best", "learner.eval_every=0"))
+    # Validation asked for, but the training kept no best.pt (trained by older code, say).
+    with pytest.raises(ConfigError, match=r"kept no best.pt .*eval.checkpoint=final"):
+        run_job(make_cfg(VALIDATION_ON, "eval.checkpoint=best"), launch,
+                train_fn=ValidatingLearner(keep_best=False), evaluate_fn=fake_evaluate)
+    assert runs(launch, "eval") == []  # stopped before an evaluation run was opened
+    with pytest.raises(ConfigError, match="eval.checkpoint='last' is not allowed"):
+        validate(make_cfg("eval.checkpoint=last"))
+
+
+def test_metric_values_are_python_floats_without_float32_noise(launch: Path) -> None:
+    import numpy as np
+
+    assert tidy_number(np.float32(59.999992)) == 60.0
+    assert tidy_number(np.float32(0.1)) == 0.1 and tidy_number(1234567) == 1234567.0
+    assert tidy_number(float("nan")) != tidy_number(float("nan"))
+    tracker = store(launch)
+    run_id = tracker.start_run("noise", {"stage": "eval"})
+    tracker.log_metrics(run_id, {"eval/avg_speed_kmh": np.float32(60.0) - np.float32(7.6e-6)}, step=0)
+    assert tracker.get_run(run_id).data.metrics["eval/avg_speed_kmh"] == 60.0
+
+
+def test_system_metrics_on_request(launch: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setenv("MLFLOW_SYSTEM_METRICS_SAMPLING_INTERVAL", "0.2")
+
+    class SlowLearner(FakeLearner):
+        def __call__(self, cfg, checkpoint_dir, log):
+            import time
+
+            time.sleep(1.5)
+            return super().__call__(cfg, checkpoint_dir, log)
+
+    outcome = run_job(make_cfg("tracking.system_metrics=true"), launch, train_fn=SlowLearner(),
+                      evaluate_fn=fake_evaluate)
+    metrics = store(launch).get_run(outcome.training.run_id).data.metrics
+    assert "system/cpu_utilization_percentage" in metrics and "system/system_memory_usage_megabytes" in metrics
+    off = run_job(make_cfg("tracking.system_metrics=false", "seed=3"), launch, train_fn=FakeLearner(),
+                  evaluate_fn=fake_evaluate)
+    assert not any(k.startswith("system/") for k in store(launch).get_run(off.training.run_id).data.metrics)

@@ -146,3 +146,94 @@ def render_top_down(sim: HighwaySimulator, env_index: int = 0, behind: float = 6
         parts.append(caption)
     draw.text((6, strip_h / 2), "   |   ".join(parts), fill=TEXT, font=font, anchor="lm")
     return np.asarray(img.resize((out_w, out_h), Image.Resampling.LANCZOS), dtype=np.uint8)
+
+
+# --- watching a learned host: what it saw, what it chose, and the road ---------------------
+
+PANEL_BG = (16, 16, 20)
+CHOSEN = (255, 220, 40)
+BAR = (120, 150, 190)
+PANEL = 224  # px, the side of the camera and HGM panels
+TITLE_H = 18
+
+
+def hgm_colour_limit(sim_config) -> float:
+    """|cell value| of a vehicle at v_min or v_max: the HGM's colour scale runs over +-this.
+    Values lie in +-(v_max - v_mid) / v_mid for vehicles within the speed limits."""
+    v_mid = (sim_config.v_max + sim_config.v_min) / 2
+    return (sim_config.v_max - v_mid) / v_mid
+
+
+def hgm_picture(values: np.ndarray, limit: float) -> np.ndarray:
+    """HGM cell values [H, W] (decoded) as an RGB picture, blue slower and red faster than v_mid."""
+    from matplotlib import colormaps
+
+    scaled = np.clip((values + limit) / (2 * limit), 0.0, 1.0)
+    return (colormaps["RdBu_r"](scaled)[..., :3] * 255).astype(np.uint8)
+
+
+def _titled(picture: np.ndarray, title: str, size: tuple[int, int]) -> Image.Image:
+    """`picture` scaled (nearest: the network's pixels stay visible) under a title line."""
+    w, h = size
+    panel = Image.new("RGB", (w, h + TITLE_H), PANEL_BG)
+    panel.paste(Image.fromarray(picture).resize((w, h), Image.Resampling.NEAREST), (0, TITLE_H))
+    ImageDraw.Draw(panel).text((4, TITLE_H / 2), title, fill=TEXT, font=_font(12), anchor="lm")
+    return panel
+
+
+def _action_values_panel(action_values: np.ndarray, chosen: int | None, size: tuple[int, int]) -> Image.Image:
+    """One row per action: its name, a bar from the smallest to the largest Q, the value; the chosen one highlighted."""
+    w, h = size
+    panel = Image.new("RGB", (w, h), PANEL_BG)
+    draw = ImageDraw.Draw(panel)
+    font = _font(13)
+    draw.text((6, TITLE_H / 2), "Q-values (greedy: the largest is chosen)", fill=TEXT, font=_font(12), anchor="lm")
+    lo, hi = float(action_values.min()), float(action_values.max())
+    span = max(hi - lo, 1e-6)
+    row_h = (h - TITLE_H - 6) / len(action_values)
+    name_w, value_w = 110, 80
+    for a, q in enumerate(action_values):
+        y = TITLE_H + 3 + a * row_h
+        colour = CHOSEN if a == chosen else TEXT
+        name = Action(a).name.lower().replace("_", " ")
+        draw.text((6, y + row_h / 2), ("> " if a == chosen else "  ") + name, fill=colour, font=font, anchor="lm")
+        bar = (w - name_w - value_w - 12) * (0.08 + 0.92 * (float(q) - lo) / span)
+        draw.rectangle([name_w, y + row_h * 0.2, name_w + bar, y + row_h * 0.8], fill=CHOSEN if a == chosen else BAR)
+        draw.text((w - 6, y + row_h / 2), f"{float(q):+.3f}", fill=colour, font=font, anchor="rm")
+    return panel
+
+
+def render_watch_frame(sim: HighwaySimulator, env_index: int, observation: dict, action_values: np.ndarray,
+                       action: int | None, caption: str | None = None, hgm_limit: float | None = None,
+                       **top_down_kwargs) -> np.ndarray:
+    """One frame of a learned host driving: top row the network's inputs (the newest camera frame
+    and HGM of its stacks) and its Q-values with the chosen action; below, the top-down view.
+
+    `observation`: the stacked observations the network read (`camera`, `hgm` uint8 [N, 3F, H, W],
+    only the streams the model has); `action_values`: its Q-values [5] for env `env_index`.
+    """
+    top = render_top_down(sim, env_index, action=action, caption=caption, **top_down_kwargs)
+    panels: list[Image.Image] = []
+    if "camera" in observation:
+        camera = observation["camera"][env_index, -3:].permute(1, 2, 0).cpu().numpy()
+        panels.append(_titled(camera, f"camera {camera.shape[0]}x{camera.shape[1]} (input)", (PANEL, PANEL)))
+    if "hgm" in observation:
+        from ..observations import decode_hgm
+
+        values = decode_hgm(observation["hgm"][env_index, -3]).cpu().numpy()
+        limit = hgm_limit if hgm_limit is not None else hgm_colour_limit(sim.config)
+        panels.append(_titled(hgm_picture(values, limit), f"HGM {values.shape[0]}x{values.shape[1]} (input)",
+                              (PANEL, PANEL)))
+    gap = 4
+    width = top.shape[1]
+    used = sum(p.width + gap for p in panels)
+    panels.append(_action_values_panel(np.asarray(action_values, dtype=np.float64), action,
+                                       (max(width - used, 260), PANEL + TITLE_H)))
+    row_w = sum(p.width for p in panels) + gap * (len(panels) - 1)
+    frame = Image.new("RGB", (max(row_w, width), PANEL + TITLE_H + gap + top.shape[0]), PANEL_BG)
+    x = 0
+    for panel in panels:
+        frame.paste(panel, (x, 0))
+        x += panel.width + gap
+    frame.paste(Image.fromarray(top), (0, PANEL + TITLE_H + gap))
+    return np.asarray(frame, dtype=np.uint8)

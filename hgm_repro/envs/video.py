@@ -16,6 +16,8 @@ from ..simulator.highway import HighwaySimulator
 from .render import render_top_down
 
 Policy = Callable[[HighwaySimulator], torch.Tensor]
+# draws env `env_index` of the simulator as it is now: (sim, env_index, action, caption) -> [h, w, 3] uint8
+Render = Callable[[HighwaySimulator, int, "int | None", "str | None"], np.ndarray]
 
 
 def save_episode(frames: Sequence[np.ndarray], path: str | Path, fps: float = 4.0) -> Path:
@@ -55,14 +57,17 @@ def save_episode(frames: Sequence[np.ndarray], path: str | Path, fps: float = 4.
 
 def record_episode(sim: HighwaySimulator, driver_or_policy: Driver | Policy, path: str | Path,
                    max_decisions: int | None = None, env_index: int = 0, fps: float | None = None,
-                   **render_kwargs: Any) -> dict[str, float]:
+                   render: Render | None = None, **render_kwargs: Any) -> dict[str, float]:
     """Reset `sim`, drive it with a driver (`.act(sim)`, its safety layer attached) or a policy
     (a callable `sim -> LongTensor[N]` of actions) until env `env_index` ends its episode or
-    `max_decisions` pass, save the top-down video of that env to `path`, and return its metrics.
+    `max_decisions` pass, save the video of that env to `path`, and return its metrics.
 
-    All envs of `sim` step together (the simulator is batched); only `env_index` is filmed.
-    `fps` defaults to twice real time, one frame per decision. `render_kwargs` go to
-    `render_top_down` (all but `action` and `caption`, which this function fills in).
+    One frame per state: frame t shows the state after t decisions, the decision taken in it
+    (none on the last frame) and what happened in the step into it (a collision, an overtake).
+    So a video of d decisions has d + 1 frames. All envs of `sim` step together (the simulator
+    is batched); only `env_index` is filmed. `fps` defaults to twice real time. `render` draws a
+    frame (default: the top-down view, `render_top_down` with `render_kwargs`); it is called right
+    after the policy chose, so it may show what the policy saw.
     """
     act: Policy
     if hasattr(driver_or_policy, "act"):
@@ -72,20 +77,26 @@ def record_episode(sim: HighwaySimulator, driver_or_policy: Driver | Policy, pat
     else:
         raise TypeError(f"record_episode needs a driver with .act(sim) or a callable policy, "
                         f"got {type(driver_or_policy).__name__}")
+    if render is None:
+        def render(sim_: HighwaySimulator, env: int, action: int | None, caption: str | None) -> np.ndarray:
+            return render_top_down(sim_, env, action=action, caption=caption, **render_kwargs)
+
     limit = sim.config.episode_decisions if max_decisions is None else int(max_decisions)
     sim.reset()
-    frames = [render_top_down(sim, env_index, **render_kwargs)]
+    frames: list[np.ndarray] = []
     metrics: dict[str, float] = {}
+    caption: str | None = None
     for _ in range(limit):
         action = act(sim)
+        frames.append(render(sim, env_index, int(action[env_index]), caption))
         result = sim.step(action)
         # The NPC a crashed host hit is gone from the road at once (it respawns), so say so in words.
         events = [name for name, flag in (("COLLISION", result.collision), ("dangerous", result.dangerous),
                                           ("overtake", result.overtakes > 0)) if bool(flag[env_index])]
-        frames.append(render_top_down(sim, env_index, action=int(action[env_index]),
-                                      caption=" ".join(events) or None, **render_kwargs))
+        caption = " ".join(events) or None
         metrics = {k: float(v[env_index]) for k, v in result.episode.items()}
         if bool(result.done[env_index]):
             break
+    frames.append(render(sim, env_index, None, caption))
     save_episode(frames, path, fps=fps if fps is not None else 2.0 / sim.config.decision_dt)
     return metrics

@@ -1,18 +1,20 @@
-"""The episode GIF an evaluation run carries: the job's host driving one episode of its scenario.
+"""Videos of a host driving: the episode GIF an evaluation run carries, and watching a trained agent.
 
-Glue between the job and `hgm_repro.envs.video.record_episode`: a non-learning host is its
-driver; a learned host is the greedy policy of its checkpoint's network over the same
-observation stacks the learner trained on.
+Glue between the job (or `python -m hgm_repro.show`) and `hgm_repro.envs.video.record_episode`:
+a non-learning host is its driver; a learned host is the greedy policy of its checkpoint's
+network over the same observation stacks the learner trained on. With `panels`, each frame also
+shows what the network saw (camera, HGM) and its Q-values beside the top-down view.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import torch
 from omegaconf import DictConfig
 
+from ..envs.render import render_watch_frame
 from ..envs.video import record_episode
 from ..observations import ObservationBuilder, ObservationConfig
 from ..simulator import HighwaySimulator
@@ -23,37 +25,49 @@ from .policies import attached_driver, trained_network
 GIF_SEED_OFFSET = 7919
 
 
-Policy = Callable[[HighwaySimulator], torch.Tensor]
+class GreedyPolicy:
+    """`sim -> actions`: argmax of the trained network over stacked observations of `sim`.
 
+    Keeps what it last saw (`observation`) and computed (`action_values` [N, 5]) for the frame
+    that shows the decision."""
 
-def greedy_policy(cfg: DictConfig, checkpoint: Path, sim: HighwaySimulator) -> Policy:
-    """`sim -> actions`: argmax of the trained network over stacked observations of `sim`."""
-    net = trained_network(cfg, checkpoint, torch.device(cfg.device))
-    builder = ObservationBuilder(sim, ObservationConfig.from_config(cfg.observation, cfg.model.streams))
-    calls = 0
+    def __init__(self, cfg: DictConfig, checkpoint: Path, sim: HighwaySimulator) -> None:
+        self.net = trained_network(cfg, checkpoint, torch.device(cfg.device))
+        self.builder = ObservationBuilder(sim, ObservationConfig.from_config(cfg.observation, cfg.model.streams))
+        self.calls = 0
+        self.observation: dict[str, torch.Tensor] = {}
+        self.action_values = torch.empty(0)
 
     @torch.no_grad()
-    def act(sim_: HighwaySimulator) -> torch.Tensor:
-        nonlocal calls
-        # record_episode resets, then calls act once before every step: the first call sees the
-        # fresh episode, every later one the state one step on.
-        obs = builder.reset() if calls == 0 else builder.step()
-        calls += 1
-        return net(*(obs[k] for k in net.in_keys)).argmax(dim=-1)
+    def __call__(self, sim: HighwaySimulator) -> torch.Tensor:
+        # record_episode resets, then calls the policy once before every step: the first call sees
+        # the fresh episode, every later one the state one step on.
+        self.observation = self.builder.reset() if self.calls == 0 else self.builder.step()
+        self.calls += 1
+        self.action_values = self.net(*(self.observation[k] for k in self.net.in_keys))
+        return self.action_values.argmax(dim=-1)
 
-    return act
+    def render(self, sim: HighwaySimulator, env_index: int, action: int | None, caption: str | None) -> np.ndarray:
+        """The frame of the state the policy just decided in (`record_episode`'s `render`)."""
+        return render_watch_frame(sim, env_index, self.observation, self.action_values[env_index].cpu().numpy(),
+                                  action, caption)
 
 
-def record_gif(cfg: DictConfig, checkpoint: Path | None, path: Path) -> Path:
-    """Drive one episode of `cfg.scenario` with the job's host and save it as a GIF at `path`."""
+def record_gif(cfg: DictConfig, checkpoint: Path | None, path: Path, seed: int | None = None,
+               panels: bool = False, max_decisions: int | None = None) -> dict[str, float]:
+    """Drive one episode of `cfg.scenario` with the job's host, save it at `path` (.gif or .mp4)
+    and return the episode's metrics. The traffic comes from `seed` (default: the job's seed plus
+    GIF_SEED_OFFSET). `panels` (learned hosts): every frame shows the network's inputs and Q-values."""
     sim_cfg = simulator_config(cfg.simulator)
-    sim = HighwaySimulator(sim_cfg, scenario_config(cfg.scenario, sim_cfg), n_envs=1,
-                           device=str(cfg.device), seed=int(cfg.seed) + GIF_SEED_OFFSET)
+    seed = int(cfg.seed) + GIF_SEED_OFFSET if seed is None else int(seed)
+    sim = HighwaySimulator(sim_cfg, scenario_config(cfg.scenario, sim_cfg), n_envs=1, device=str(cfg.device),
+                           seed=seed)
+    render = None
     if cfg.model.learned:
         if checkpoint is None:
             raise ValueError(f"learned model {cfg.model.name!r} has no checkpoint to film")
-        host = greedy_policy(cfg, checkpoint, sim)
+        host = GreedyPolicy(cfg, checkpoint, sim)
+        render = host.render if panels else None
     else:
         host = attached_driver(cfg, sim)
-    record_episode(sim, host, path)
-    return path
+    return record_episode(sim, host, path, max_decisions=max_decisions, render=render)

@@ -19,6 +19,9 @@ from .config_tree import flatten
 from .train_key import train_key, training_config
 
 CHECKPOINT_FORMAT = 1
+# The files a training leaves in its checkpoint directory that evaluation may load.
+FINAL_CHECKPOINT = "final.pt"  # the network at the end of training: the paper's protocol tests this one
+BEST_CHECKPOINT = "best.pt"  # the network with the best validation return so far (validation on only)
 
 # What a network's weights depend on: evaluation needs only these to match.
 ARCHITECTURE_KEYS = ("model.name", "model.network", "model.streams", "observation")

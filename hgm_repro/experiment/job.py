@@ -15,7 +15,7 @@ import os
 import tempfile
 import time
 from collections.abc import Callable, Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -23,9 +23,21 @@ from typing import Any
 from filelock import FileLock, Timeout
 from omegaconf import DictConfig, OmegaConf
 
+from ..metrics import VALIDATION_RETURN
+from ..simulator.config import ConfigError
+from .checkpoint import BEST_CHECKPOINT, FINAL_CHECKPOINT
 from .interrupts import JobInterrupted, raise_if_pending, sigterm_raises
 from .schema import JobConfig, validate
-from .tracking import PARENT_RUN_ENV, Tracker, flatten, git_info, resolve_location
+from .tracking import (
+    PARENT_RUN_ENV,
+    Tracker,
+    flatten,
+    git_info,
+    launch_description,
+    launch_tags,
+    resolve_location,
+    scenario_label,
+)
 from .train_key import train_key, training_config
 
 log = logging.getLogger(__name__)
@@ -50,6 +62,7 @@ class JobOutcome:
     eval_run_id: str
     means: dict[str, float] = field(default_factory=dict)
     seconds: float = 0.0
+    validation_return: float | None = None  # the training run's best `val/episode_return`
 
 
 def hydra_job(cfg: DictConfig) -> float | None:
@@ -58,10 +71,17 @@ def hydra_job(cfg: DictConfig) -> float | None:
     from hydra.types import RunMode
     from hydra.utils import get_original_cwd
 
-    multirun = HydraConfig.get().mode == RunMode.MULTIRUN
+    hydra_cfg = HydraConfig.get()
+    multirun = hydra_cfg.mode == RunMode.MULTIRUN
+    # A sweep's parent run is opened by the SweepTracking callback; a single job opens its own.
     parent = os.environ.get(PARENT_RUN_ENV) if multirun else None
-    outcome = run_job(cfg, Path(get_original_cwd()), parent_run_id=parent)
-    return outcome.means.get("eval/episode_return")  # what a Hydra sweeper would optimise
+    single = None if multirun else " ".join(hydra_cfg.overrides.task)
+    outcome = run_job(cfg, Path(get_original_cwd()), parent_run_id=parent, launch_overrides=single)
+    # What a Hydra sweeper optimises: the validation return, never a test scenario's.
+    if multirun and outcome.validation_return is None and cfg.model.get("learned", True):
+        log.warning("no %s in training run %s (validation off: learner.eval_every=0): a sweeper gets "
+                    "nothing to optimise", VALIDATION_RETURN, outcome.training.run_id)
+    return outcome.validation_return
 
 
 def run_job(
@@ -70,7 +90,10 @@ def run_job(
     parent_run_id: str | None = None,
     train_fn: TrainFn | None = None,
     evaluate_fn: EvaluateFn | None = None,
+    launch_overrides: str | None = None,
 ) -> JobOutcome:
+    """One job. `launch_overrides` (the command line's overrides) makes it a launch of its own:
+    a parent run groups its training and evaluation, as a sweep's parent run groups a sweep's."""
     job = validate(cfg)  # before anything touches the store, the disk or the simulator
     key = train_key(cfg)
     label = f"model={job.model.name} scenario={job.scenario.name} seed={job.seed} train_key={key}"
@@ -79,23 +102,36 @@ def run_job(
     tracker = Tracker(resolve_location(cfg.tracking, launch_dir), job.tracking.experiment_name)
     for run_id in tracker.mark_orphans_killed(key):
         log.info("run %s was left RUNNING by a process that no longer exists: marked KILLED", run_id)
+    serve = tracker.ui_command()
+    log.info("MLflow runs: %s%s", tracker.ui_url(), f" (serve the store first: {serve})" if serve else "")
     commit, dirty = git_info()
     tags = {"model": job.model.name, "seed": job.seed, "train_key": key, "git_commit": commit,
             "git_dirty": dirty, "experiment": job.experiment.name, "device": job.device}
+    launch_run = description = None
+    if launch_overrides is not None and parent_run_id is None:
+        description = launch_description("job", launch_overrides, Path(launch_dir).resolve())
+        launch_run = parent_run_id = tracker.start_run(
+            f"job {job.model.name} seed{job.seed} {scenario_label(job.scenario.name)}",
+            # train_key: a SIGKILLed job's launch run is closed with its training (mark_orphans_killed).
+            {**launch_tags("job", launch_overrides), "train_key": key}, description=description)
+    validation_return = None
     try:
-        with sigterm_raises():
+        with sigterm_raises(), (_run_status(tracker, launch_run) if launch_run else nullcontext()):
             if job.model.learned:
                 training = obtain_checkpoint(cfg, job, key, tracker, tags, parent_run_id, train_fn)
+                validation_return = tracker.best_value(training.run_id, VALIDATION_RETURN)
             else:
                 training = Training("none")
             eval_run_id, means = evaluate_and_log(cfg, job, tracker, tags, parent_run_id, training, evaluate_fn)
+            if launch_run:
+                tracker.summarise_launch(launch_run, description)
     except JobInterrupted as interrupted:
         log.error("job interrupted (%s): %s; the same command resumes it", interrupted, label)
         raise SystemExit(128 + interrupted.signum) from interrupted
     seconds = time.monotonic() - started
     summary = " ".join(f"{k}={v:.3g}" for k, v in means.items() if k in ("eval/avg_speed_kmh", "eval/episode_return"))
     log.info("job end: %s training=%s %s (%.1f s)", label, training.how, summary, seconds)
-    return JobOutcome(key, training, eval_run_id, means, seconds)
+    return JobOutcome(key, training, eval_run_id, means, seconds, validation_return)
 
 
 # --- training -----------------------------------------------------------------------------
@@ -150,14 +186,15 @@ def _reusable_training(
         # force_retrain means "not an older training": one trained earlier in this sweep counts.
         if force_retrain and (parent_run_id is None or run.data.tags.get("mlflow.parentRunId") != parent_run_id):
             return None
-        checkpoint = _local_checkpoint(tracker, run, checkpoint_dir)
+        checkpoint = local_checkpoint(tracker, run, checkpoint_dir)
         if checkpoint is not None:
             return Training("reused", run.info.run_id, checkpoint)
         log.warning("training run %s has no checkpoint left on disk or in the store", run.info.run_id)
     return None
 
 
-def _local_checkpoint(tracker: Tracker, run: Any, checkpoint_dir: Path) -> Path | None:
+def local_checkpoint(tracker: Tracker, run: Any, checkpoint_dir: Path) -> Path | None:
+    """A training run's final checkpoint on this machine: where it was written, else fetched from the store."""
     saved = run.data.tags.get("checkpoint_path")
     if saved and Path(saved).is_file():
         return Path(saved)
@@ -167,8 +204,10 @@ def _local_checkpoint(tracker: Tracker, run: Any, checkpoint_dir: Path) -> Path 
     except Exception as error:
         log.debug("no checkpoint artifact in run %s: %s", run.info.run_id, error)
         return None
-    files = sorted(fetched.glob("*.pt")) if fetched.is_dir() else [fetched]
-    return files[0] if files else None
+    if not fetched.is_dir():
+        return fetched
+    final = fetched / FINAL_CHECKPOINT
+    return final if final.is_file() else None
 
 
 def _clear_checkpoints(checkpoint_dir: Path) -> None:
@@ -192,21 +231,59 @@ def _train(
         tracker.set_tags(run_id, {"resumes": resumes, "device": tags["device"]})
         log.info("resuming training run %s from %s", run_id, checkpoint_dir / "last.pt")
     else:
+        from ..learner.builders import make_network
+        from ..networks import param_counts
+
         how = "trained"
-        name = f"train-{cfg.model.name}-seed{cfg.seed}-{key}"
-        run_id = tracker.start_run(name, job_tags, parent_run_id)
+        run_id = tracker.start_run(f"{cfg.model.name} seed{cfg.seed} training {key}", job_tags, parent_run_id,
+                                   description=_training_description(cfg, key, checkpoint_dir))
         (checkpoint_dir / RUN_ID_FILE).write_text(run_id)
-        tracker.log_params(run_id, flatten(training_config(cfg)))
+        tracker.log_params(run_id, {**flatten(training_config(cfg)),
+                                    **{k: str(v) for k, v in param_counts(make_network(cfg)).items()}})
         tracker.log_text(run_id, OmegaConf.to_yaml(cfg, resolve=True), "config.yaml")
 
     def log_to_run(metrics: dict[str, float], step: int) -> None:
         tracker.log_metrics(run_id, metrics, step)
 
     with _run_status(tracker, run_id):
-        checkpoint = Path(train_fn(cfg, checkpoint_dir, log_to_run)).resolve()
+        with tracker.system_metrics(run_id, bool(cfg.tracking.get("system_metrics", False))):
+            checkpoint = Path(train_fn(cfg, checkpoint_dir, log_to_run)).resolve()
         tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
+        best = checkpoint.with_name(BEST_CHECKPOINT)
+        if best.is_file():
+            tracker.log_artifact(run_id, best, CHECKPOINT_ARTIFACT)
+        if cfg.tracking.get("log_model", True):
+            import torch
+
+            from ..evaluation.policies import trained_network
+
+            tracker.log_model(run_id, trained_network(cfg, checkpoint, torch.device("cpu")))
         tracker.set_tags(run_id, {"checkpoint_path": str(checkpoint)})
     return Training(how, run_id, checkpoint)
+
+
+def _training_description(cfg: DictConfig, key: str, checkpoint_dir: Path) -> str:
+    return (f"Training of **{cfg.model.name}** (seed {cfg.seed}) in the training traffic "
+            f"(`{cfg.train_scenario.name}`) for {cfg.learner.total_steps} env steps, experiment preset "
+            f"`{cfg.experiment.name}`, train_key `{key}`. Checkpoints in `{checkpoint_dir}`; the final network "
+            "is also the MLflow model `model` of this run (`mlflow.pytorch.load_model`). Every evaluation of "
+            "this training links here.")
+
+
+def checkpoint_to_evaluate(cfg: DictConfig, training: Training) -> Path | None:
+    """`eval.checkpoint`: the final network (the paper's protocol) or the one with the best
+    validation return, which training keeps as best.pt beside final.pt when validation is on."""
+    which = str(cfg.get("eval", {}).get("checkpoint", "final"))
+    if training.checkpoint is None or which == "final":
+        return training.checkpoint
+    best = training.checkpoint.with_name(BEST_CHECKPOINT)
+    if not best.is_file():
+        raise ConfigError(
+            f"eval.checkpoint=best, but the training (run {training.run_id}) kept no {BEST_CHECKPOINT} beside "
+            f"{training.checkpoint}: it trained without validation (learner.eval_every=0). Evaluate the final "
+            "network (eval.checkpoint=final), or train again with validation "
+            "(learner.eval_every=N force_retrain=true).")
+    return best
 
 
 @contextmanager
@@ -232,33 +309,58 @@ def evaluate_and_log(
 ) -> tuple[str, dict[str, float]]:
     if evaluate_fn is None:
         from ..evaluation import evaluate as evaluate_fn
+    checkpoint = checkpoint_to_evaluate(cfg, training)  # before the run: a missing best.pt is a config error
     eval_tags = {**tags, "stage": "eval", "scenario": job.scenario.name, "training": training.how}
     if training.run_id:
         eval_tags["train_run_id"] = training.run_id
-    name = f"eval-{job.model.name}-s{job.scenario.name}-seed{job.seed}"
-    run_id = tracker.start_run(name, eval_tags, parent_run_id)
+    if checkpoint is not None:
+        eval_tags["checkpoint"] = checkpoint.stem  # final or best
+    name = f"{job.model.name} seed{job.seed} {scenario_label(job.scenario.name)} eval"
+    description = _evaluation_description(cfg, tracker, training, checkpoint)
+    run_id = tracker.start_run(name, eval_tags, parent_run_id, description=description)
     with _run_status(tracker, run_id):
         tracker.log_params(run_id, flatten(cfg))
         tracker.log_text(run_id, OmegaConf.to_yaml(cfg, resolve=True), "config.yaml")
-        result = evaluate_fn(cfg, cfg.scenario, training.checkpoint)
+        with tracker.system_metrics(run_id, job.tracking.system_metrics):
+            result = evaluate_fn(cfg, cfg.scenario, checkpoint)
         means = {k: float(v) for k, v in result.means.items()}
         tracker.log_metrics(run_id, means, step=0)
+        tracker.describe(run_id, description + "\n\n" + _results_sentence(means))
         with tempfile.TemporaryDirectory() as tmp:
             episodes = Path(tmp) / "episodes.csv"
             result.episodes.to_csv(episodes, index_label="episode")
             tracker.log_artifact(run_id, episodes)
             if job.tracking.log_gif:
-                _log_gif(cfg, training, tracker, run_id, Path(tmp))
+                _log_gif(cfg, checkpoint, tracker, run_id, Path(tmp))
     return run_id, means
 
 
-def _log_gif(cfg: DictConfig, training: Training, tracker: Tracker, run_id: str, tmp: Path) -> None:
+def _evaluation_description(cfg: DictConfig, tracker: Tracker, training: Training, checkpoint: Path | None) -> str:
+    scenario = cfg.scenario.name
+    where = f"scenario {scenario}" if str(scenario).isdigit() else f"the `{scenario}` traffic"
+    text = (f"Evaluation of **{cfg.model.name}** (seed {cfg.seed}) in {where}: {cfg.learner.test_steps} greedy "
+            f"decisions over {cfg.learner.test_envs} envs, test traffic drawn from seeds no training uses.")
+    if training.run_id is None:
+        return text + " A non-learning host: nothing was trained."
+    link = tracker.run_link(training.run_id, f"training run {training.run_id[:8]}")
+    how = {"reused": "reused from", "trained": "trained by", "resumed": "resumed by"}.get(training.how, "from")
+    return text + f" The network ({checkpoint.name if checkpoint else '?'}) was {how} {link}."
+
+
+def _results_sentence(means: dict[str, float]) -> str:
+    parts = [f"{label} **{means[key]:.4g}**" for key, label in (
+        ("eval/episode_return", "mean episode return"), ("eval/avg_speed_kmh", "speed (km/h)"),
+        ("eval/collisions", "collisions per episode"), ("eval/episodes", "episodes")) if key in means]
+    return "Results: " + ", ".join(parts) + "." if parts else ""
+
+
+def _log_gif(cfg: DictConfig, checkpoint: Path | None, tracker: Tracker, run_id: str, tmp: Path) -> None:
     """One evaluation episode as a GIF; optional, since a failed video must not fail a job."""
     from ..evaluation.media import record_gif
 
     path = tmp / "episode.gif"
     try:
-        record_gif(cfg, training.checkpoint, path)
+        record_gif(cfg, checkpoint, path)
     except Exception as error:  # rendering is a nicety, the metrics are logged already
         log.warning("episode GIF failed: %s", error)
         tracker.set_tags(run_id, {"gif": f"failed: {str(error)[:200]}"})

@@ -97,6 +97,13 @@ class TrackingSchema:
     artifact_dir: str | None = None
     checkpoint_dir: str | None = None
     log_gif: bool = True
+    log_model: bool = True
+    system_metrics: bool = False
+
+
+@dataclass(frozen=True)
+class EvalSchema:
+    checkpoint: Literal["final", "best"] = "final"
 
 
 @dataclass(frozen=True)
@@ -117,6 +124,7 @@ class JobConfig:
     model: ModelSchema
     tracking: TrackingSchema
     experiment: ExperimentSchema
+    eval: EvalSchema
     simulator: SimulatorConfig
     scenario: ScenarioConfig
     train_scenario: ScenarioConfig
@@ -209,6 +217,23 @@ def _check_device(device: Any, errors: list[str]) -> None:
             errors.append(f"device={device!r} is not available: {torch.cuda.device_count()} CUDA device(s)")
 
 
+def _check_eval(evaluation: Any, model: Any, learner: Any, errors: list[str]) -> None:
+    learned = isinstance(model, ModelSchema) and model.learned
+    if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "best" and learned:
+        if isinstance(learner, Mapping) and not learner.get("eval_every", 0):
+            errors.append("eval.checkpoint=best is not allowed with learner.eval_every=0: without validation "
+                          "training keeps no best.pt (set learner.eval_every=N, or eval.checkpoint=final)")
+
+
+def _check_tracking(tracking: Any, errors: list[str]) -> None:
+    if isinstance(tracking, TrackingSchema) and tracking.system_metrics:
+        import importlib.util
+
+        if importlib.util.find_spec("psutil") is None:
+            errors.append("tracking.system_metrics=true needs psutil, which is not installed "
+                          "(pip install 'hgm_repro[system-metrics]')")
+
+
 def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     """Check the whole job config; raise `ConfigError` listing every bad value."""
     root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
@@ -218,6 +243,7 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
         "model": check_node(ModelSchema, root.get("model"), "model", errors),
         "tracking": check_node(TrackingSchema, root.get("tracking"), "tracking", errors),
         "experiment": check_node(ExperimentSchema, root.get("experiment"), "experiment", errors),
+        "eval": check_node(EvalSchema, root.get("eval", {}), "eval", errors),
     }
     _check_model(parts["model"], errors)
     seed = root.get("seed")
@@ -232,6 +258,9 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
             f"learner.buffer_size={learner.buffer_size} is not allowed: "
             f"must be >= learner.batch_size={learner.batch_size}"
         )
+
+    _check_eval(parts["eval"], parts["model"], root.get("learner"), errors)
+    _check_tracking(parts["tracking"], errors)
 
     # The observation builders and the simulator own their rules; collect their messages with the others.
     observation = None

@@ -9,14 +9,18 @@ a file lock and every write is retried while SQLite answers "database is locked"
 from __future__ import annotations
 
 import atexit
+import getpass
 import logging
+import math
 import os
 import socket
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -36,6 +40,21 @@ MAX_PARAM_VALUE = 500
 PARAMS_PER_BATCH = 100
 METRICS_PER_BATCH = 1000
 PARENT_RUN_ENV = "HGM_REPRO_PARENT_RUN_ID"  # how a sweep's parent run id reaches its jobs
+# MLflow's own tags: the UI shows them as a run's Source, Version and User, and its description.
+SOURCE_NAME = "python -m hgm_repro"
+NOTE = "mlflow.note.content"
+# MLflow 3 opens an experiment on its GenAI pages unless told otherwise.
+RUNS_VIEW = "runs?workflowType=machine_learning"
+# What a launch's parent run summarises of its evaluations (means over seeds).
+SUMMARY_METRICS = ("episode_return", "avg_speed_kmh", "collisions")
+EXPERIMENT_DESCRIPTION = (
+    "Runs of **hgm_repro**, the reproduction of Bai et al.'s Hyper-Grid Matrix driving-decision paper.\n\n"
+    "Every top-level run is one launch of `python -m hgm_repro`: a sweep (`-m`) or a single job. Expand it "
+    "to see the runs it made: trainings (tag `stage=train`, in the training traffic) and evaluations "
+    "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's own "
+    "metrics `grid/<model>/scenario<s>/<metric>` are the means over its evaluations.\n\n"
+    "Figures, tables and the PDF report: `python -m analysis`."
+)
 
 
 @dataclass(frozen=True)
@@ -101,6 +120,37 @@ def git_info(repo_root: Path = PACKAGE_ROOT.parent) -> tuple[str, str]:
         return "unknown", "unknown"
 
 
+@lru_cache(maxsize=1)
+def source_tags() -> dict[str, str]:
+    """MLflow's standard tags for the code and person behind a run (the UI's Source and User)."""
+    commit, _ = git_info()
+    tags = {"mlflow.source.name": SOURCE_NAME, "mlflow.source.type": "LOCAL", "mlflow.user": _user()}
+    if commit != "unknown":
+        tags["mlflow.source.git.commit"] = commit
+    return tags
+
+
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):  # no passwd entry (some containers)
+        return str(os.getuid()) if hasattr(os, "getuid") else "unknown"
+
+
+def tidy_number(value: Any) -> float:
+    """A metric value as a python float without float32 noise: whole numbers stay exact, others keep
+    6 significant digits (a float32 mean of speeds gives 59.999992 for 60)."""
+    number = float(value)
+    if not math.isfinite(number) or number.is_integer():
+        return number
+    return float(f"{number:.6g}")
+
+
+def scenario_label(name: str) -> str:
+    """`3` -> `scenario3`, `train` -> `train-traffic`: never a bare `s3`, which reads as `strain` for `train`."""
+    return f"scenario{name}" if str(name).isdigit() else f"{name}-traffic"
+
+
 def flatten(node: Mapping[str, Any] | DictConfig, prefix: str = "") -> dict[str, str]:
     """`{'a': {'b': 1}}` -> `{'a.b': '1'}`, values cut to MLflow's param length."""
     return {k: str(v)[:MAX_PARAM_VALUE] for k, v in flatten_tree(node, prefix).items()}
@@ -124,6 +174,33 @@ class Tracker:
         with FileLock(str(location.lock_path)):
             self.client = MlflowClient(tracking_uri=location.tracking_uri)
             self.experiment_id = retry(self._get_or_create_experiment, experiment_name)
+            retry(self._describe_experiment)
+
+    def _describe_experiment(self) -> None:
+        """The experiment's description, and its kind, so that the UI opens on runs (not GenAI traces)."""
+        tags = self.client.get_experiment(self.experiment_id).tags
+        wanted = {NOTE: EXPERIMENT_DESCRIPTION, "mlflow.experimentKind": "custom_model_development"}
+        for key, value in wanted.items():
+            if key not in tags:  # never overwrite what a user wrote in the UI
+                self.client.set_experiment_tag(self.experiment_id, key, value)
+
+    def ui_url(self) -> str:
+        """The address that opens this experiment's runs in the MLflow UI (`mlflow ui` for a local store)."""
+        uri = self.location.tracking_uri
+        base = uri.rstrip("/") if uri.startswith(("http://", "https://")) else "http://127.0.0.1:5000"
+        return f"{base}/#/experiments/{self.experiment_id}/{RUNS_VIEW}"
+
+    def ui_command(self) -> str | None:
+        """The `mlflow ui` command that serves a local store (None for a server)."""
+        if not self.location.is_local:
+            return None
+        root = self.location.artifact_location
+        artifacts = f" --default-artifact-root {root}" if root else ""
+        return f"mlflow ui --backend-store-uri {self.location.tracking_uri}{artifacts}"
+
+    def run_link(self, run_id: str, text: str) -> str:
+        """A markdown link to a run that works inside the UI (descriptions are rendered there)."""
+        return f"[{text}](#/experiments/{self.experiment_id}/runs/{run_id})"
 
     def _get_or_create_experiment(self, name: str) -> str:
         found = self.client.get_experiment_by_name(name)
@@ -144,9 +221,12 @@ class Tracker:
         with protected():
             return retry(call, *args, **kwargs)
 
-    def start_run(self, name: str, tags: Mapping[str, str], parent_run_id: str | None = None) -> str:
-        tags = {k: str(v) for k, v in tags.items()}
+    def start_run(self, name: str, tags: Mapping[str, str], parent_run_id: str | None = None,
+                  description: str | None = None) -> str:
+        tags = {**source_tags(), **{k: str(v) for k, v in tags.items()}}
         tags["host"], tags["pid"] = socket.gethostname(), str(os.getpid())
+        if description:
+            tags[NOTE] = description
         if parent_run_id:
             tags["mlflow.parentRunId"] = parent_run_id
         run = self._write(self.client.create_run, self.experiment_id, tags=tags, run_name=name)
@@ -165,6 +245,10 @@ class Tracker:
 
         self._write(self.client.log_batch, run_id, tags=[RunTag(k, str(v)) for k, v in tags.items()])
 
+    def describe(self, run_id: str, description: str) -> None:
+        """The run's description in the UI (markdown)."""
+        self.set_tags(run_id, {NOTE: description})
+
     def log_params(self, run_id: str, params: Mapping[str, str]) -> None:
         from mlflow.entities import Param
 
@@ -176,7 +260,7 @@ class Tracker:
         from mlflow.entities import Metric
 
         now = int(time.time() * 1000)
-        items = [Metric(k, float(v), now, int(step)) for k, v in metrics.items()]
+        items = [Metric(k, tidy_number(v), now, int(step)) for k, v in metrics.items()]
         for chunk in _chunks(items, METRICS_PER_BATCH):
             self._write(self.client.log_batch, run_id, metrics=chunk)
 
@@ -185,6 +269,74 @@ class Tracker:
 
     def log_text(self, run_id: str, text: str, artifact_file: str) -> None:
         self._write(self.client.log_text, run_id, text, artifact_file)
+
+    def log_model(self, run_id: str, network: Any, name: str = "model") -> None:
+        """The network as an MLflow PyTorch model of the run: `mlflow.pytorch.load_model(
+        f"runs:/{run_id}/{name}")` gives it back, ready to call."""
+        import mlflow
+        import torch
+
+        # log_model works only through MLflow's fluent (process-global) run; open ours just for it.
+        mlflow.set_tracking_uri(self.location.tracking_uri)
+        requirements = [f"torch=={torch.__version__.split('+')[0]}", "hgm_repro"]
+        with protected(), mlflow.start_run(run_id=run_id):
+            # pickle: the network class stays ours (pt2 would trace one fixed input shape).
+            retry(mlflow.pytorch.log_model, network.cpu().eval(), name=name, pip_requirements=requirements,
+                  serialization_format="pickle")
+        # Leaving the fluent run marks it FINISHED: the run's owner sets its real status afterwards.
+        self._write(self.client.update_run, run_id, status="RUNNING")
+
+    @contextmanager
+    def system_metrics(self, run_id: str, enabled: bool) -> Iterator[None]:
+        """While inside, log MLflow's system metrics (CPU, memory, disk, GPU: `system/*`) to the run."""
+        if not enabled:
+            yield
+            return
+        from mlflow.system_metrics.system_metrics_monitor import SystemMetricsMonitor
+
+        monitor = SystemMetricsMonitor(run_id, sampling_interval=2, resume_logging=True,
+                                       tracking_uri=self.location.tracking_uri)
+        monitor.start()
+        try:
+            yield
+        finally:
+            monitor.finish()
+
+    def best_value(self, run_id: str, metric: str) -> float | None:
+        """The largest value a run logged for `metric` (None when it logged none)."""
+        history = retry(self.client.get_metric_history, run_id, metric)
+        values = [m.value for m in history if math.isfinite(m.value)]
+        return max(values) if values else None
+
+    def children(self, parent_run_id: str) -> list[Any]:
+        return self.search(f"tags.`mlflow.parentRunId` = '{parent_run_id}'")
+
+    def summarise_launch(self, parent_run_id: str, description: str) -> dict[str, float]:
+        """Log the means of a launch's evaluations on its parent run, per model and scenario
+        (`grid/<model>/scenario<s>/<metric>`, over seeds); its description becomes `description`
+        followed by the same means as a markdown table."""
+        groups: dict[tuple[str, str], list[Any]] = {}
+        for run in self.children(parent_run_id):
+            tags = run.data.tags
+            if tags.get("stage") == "eval" and run.info.status == "FINISHED":
+                groups.setdefault((tags.get("model", "?"), tags.get("scenario", "?")), []).append(run)
+        summary: dict[str, float] = {}
+        rows = ["| model | scenario | seeds | episode return | speed (km/h) | collisions |",
+                "|---|---|---|---|---|---|"]
+        for (model, scenario), runs in sorted(groups.items()):
+            cells = []
+            for metric in SUMMARY_METRICS:
+                values = [r.data.metrics[f"eval/{metric}"] for r in runs if f"eval/{metric}" in r.data.metrics]
+                mean = tidy_number(sum(values) / len(values)) if values else float("nan")
+                if values:
+                    summary[f"grid/{model}/{scenario_label(scenario)}/{metric}"] = mean
+                cells.append(f"{mean:.4g}")
+            rows.append(f"| {model} | {scenario} | {len(runs)} | " + " | ".join(cells) + " |")
+        if summary:
+            self.log_metrics(parent_run_id, summary, step=0)
+            description += "\n\nMeans over seeds of its evaluations:\n\n" + "\n".join(rows)
+        self.describe(parent_run_id, description)
+        return summary
 
     def get_run(self, run_id: str) -> Any | None:
         try:
@@ -236,6 +388,21 @@ def _alive(pid: int) -> bool:
     return True
 
 
+def launch_tags(kind: str, overrides: str) -> dict[str, str]:
+    """Tags of a launch's parent run. No `stage` tag: analysis reads only train and eval runs."""
+    commit, dirty = git_info()
+    return {"launch": kind, "sweep": str(kind == "sweep").lower(), "overrides": overrides[:5000],
+            "git_commit": commit, "git_dirty": dirty}
+
+
+def launch_description(kind: str, overrides: str, where: Path) -> str:
+    """A launch's description: the command, where it ran, and what sits under it."""
+    what, flag = ("A sweep", "-m ") if kind == "sweep" else ("A single job", "")
+    command = f"{SOURCE_NAME} {flag}{overrides}".strip()
+    return (f"{what}: `{command}`, launched in `{where}`. The trainings and evaluations it ran are the "
+            "runs nested under it.")
+
+
 class SweepTracking(Callback):
     """Hydra callback: one MLflow parent run per sweep, created before any job starts.
 
@@ -247,6 +414,7 @@ class SweepTracking(Callback):
     def __init__(self) -> None:
         self._tracker: Tracker | None = None
         self._parent: str | None = None
+        self._description = ""
 
     def on_multirun_start(self, config: DictConfig, **kwargs: Any) -> None:
         # Values not swept over are the same in every job: a bad one stops the sweep here,
@@ -264,20 +432,25 @@ class SweepTracking(Callback):
         if tracker is None:
             return
         sweep_dir = str(config.hydra.sweep.dir)
-        commit, dirty = git_info()
         overrides = " ".join(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))
+        self._description = launch_description("sweep", overrides, Path(sweep_dir).resolve())
         self._parent = tracker.start_run(
-            f"sweep-{Path(sweep_dir).name}",
-            # No `stage` tag: analysis reads only train and eval runs, the parent only groups them.
-            {"sweep": "true", "sweep_dir": str(Path(sweep_dir).resolve()), "overrides": overrides[:5000],
-             "git_commit": commit, "git_dirty": dirty},
+            f"sweep {Path(sweep_dir).name}",
+            {**launch_tags("sweep", overrides), "sweep_dir": str(Path(sweep_dir).resolve())},
+            description=self._description,
         )
         os.environ[PARENT_RUN_ENV] = self._parent
         # A sweep that raises never reaches on_multirun_end: close the parent run anyway.
         atexit.register(self._close, "FAILED")
-        log.info("MLflow parent run %s (%s)", self._parent, tracker.location.tracking_uri)
+        log.info("MLflow parent run %s (%s); runs: %s", self._parent, tracker.location.tracking_uri,
+                 tracker.ui_url())
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
+        if self._tracker is not None and self._parent is not None:
+            try:
+                self._tracker.summarise_launch(self._parent, self._description)
+            except Exception as error:  # the summary is a convenience; the runs are all logged
+                log.warning("sweep summary not logged: %s", error)
         self._close("FINISHED")
         atexit.unregister(self._close)
 

@@ -26,11 +26,10 @@ from tqdm import tqdm
 
 from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
-from ..experiment.checkpoint import load_checkpoint, recorded_training_config, save_checkpoint
+from ..experiment.checkpoint import BEST_CHECKPOINT, load_checkpoint, recorded_training_config, save_checkpoint
 from ..experiment.interrupts import raise_if_pending
 from ..experiment.train_key import train_key
 from ..metrics import TRAINING_CURVE_METRICS
-from ..networks import param_counts
 from .builders import (
     make_actor,
     make_exploration,
@@ -49,7 +48,6 @@ logger = logging.getLogger(__name__)
 
 # Validation traffic: seeds that neither training (seed) nor testing (seed + EVAL_SEED_OFFSET) uses.
 VAL_SEED_OFFSET = 200_000
-BEST_CHECKPOINT = "best.pt"
 
 
 class NonFiniteLossError(FloatingPointError):
@@ -195,7 +193,6 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
         metrics["val/best_episode_return"] = best_val
         return metrics
 
-    log(param_counts(net), 0)
     progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {cfg.model.name}",
                     disable=not sys.stdout.isatty(), dynamic_ncols=True)
     episodes: dict[str, list[float]] = {k: [] for k in TRAINING_CURVE_METRICS}
