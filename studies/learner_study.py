@@ -30,7 +30,8 @@ CAMERA = ["observation.camera_pitch_deg=15", "observation.camera_fov_deg=60", "o
 DQN_FIXES = ["learner.n_step=3", "learner.double_dqn=true", "learner.loss_function=smooth_l1"]
 
 ARMS: dict[str, list[str]] = {
-    "base": [],  # the quick preset as it was (paper-like one-step DQN, level 90 degree camera)
+    # The quick preset before the study: the paper's one-step plain DQN with the L2 loss.
+    "base": ["learner.n_step=1", "learner.double_dqn=false", "learner.loss_function=l2"],
     "huber_double": ["learner.loss_function=smooth_l1", "learner.double_dqn=true"],
     "nstep": DQN_FIXES,
     "nstep_camera": DQN_FIXES + CAMERA,
