@@ -64,7 +64,7 @@ def load(store: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
     for r in runs:
         tags = r.data.tags
         arm = _arm_of(r.data.params, signatures)
-        if r.info.status != "FINISHED" or arm is None or "seed" not in tags:
+        if r.info.status != "FINISHED" or arm is None or "seed" not in tags or tags.get("model") != "proposed":
             continue
         seed = int(tags["seed"])
         if tags.get("stage") == "eval":
