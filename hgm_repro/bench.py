@@ -189,12 +189,14 @@ def bench_envs(n_envs: int, device: torch.device, seconds: float, rounds: int = 
 
 
 def _compose(*overrides: str) -> Any:
+    """The validated `JobConfig` of the root config plus `overrides`."""
     from hydra import compose, initialize_config_dir
 
     from . import CONF_DIR
+    from .experiment.schema import validate
 
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return compose("config", overrides=list(overrides))
+        return validate(compose("config", overrides=list(overrides)))
 
 
 def bench_learner_updates(device: torch.device, seconds: float, batch_size: int = 64,
@@ -206,14 +208,14 @@ def bench_learner_updates(device: torch.device, seconds: float, batch_size: int 
     from .learner.builders import make_actor, make_loss, make_network, make_update
     from .simulator import N_ACTIONS
 
-    cfg = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
+    job = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
                    f"learner.compile={mode == 'compile'}", f"learner.cuda_graph={mode == 'cuda_graph'}")
-    net = make_network(cfg).to(device)
+    net = make_network(job).to(device)
     actor = make_actor(net).to(device)
-    loss = make_loss(cfg, actor).to(device)
-    optimizer = torch.optim.Adam(loss.parameters(), lr=float(cfg.learner.lr))
-    update = make_update(cfg, loss, optimizer, device)
-    h, w, f = int(cfg.observation.height), int(cfg.observation.width), int(cfg.observation.frame_stack)
+    loss = make_loss(job.learner, actor).to(device)
+    optimizer = torch.optim.Adam(loss.parameters(), lr=job.learner.lr)
+    update = make_update(job.learner, loss, optimizer, device)
+    h, w, f = job.observation.height, job.observation.width, job.observation.frame_stack
     gen = torch.Generator(device=device).manual_seed(0)
 
     def images() -> torch.Tensor:
@@ -241,20 +243,20 @@ def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, 
     from .learner import train
 
     n_envs = 16 if device.type == "cpu" else 64
-    cfg = _compose("experiment=quick", f"device={device}", f"learner.total_steps={total_steps}",
+    job = _compose("experiment=quick", f"device={device}", f"learner.total_steps={total_steps}",
                    f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
                    f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
     threads = torch.get_num_threads()  # the preset may pin its own thread count: put ours back after
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
-        train(cfg, Path(tmp), lambda metrics, step: None)
+        train(job, Path(tmp), lambda metrics, step: None)
         _sync(device)
         elapsed = time.perf_counter() - start
     used = torch.get_num_threads()
     torch.set_num_threads(threads)
     return dict(what="learner training (quick preset, end to end)", device=str(device), n_envs=n_envs,
-                camera="front", hgm="paper", image=f"{cfg.observation.height}x{cfg.observation.width}",
-                update_every=int(cfg.learner.update_every), env_steps_per_s=round(total_steps / elapsed, 1),
+                camera="front", hgm="paper", image=f"{job.observation.height}x{job.observation.width}",
+                update_every=job.learner.update_every, env_steps_per_s=round(total_steps / elapsed, 1),
                 torch_threads=used)
 
 

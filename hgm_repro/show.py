@@ -169,6 +169,8 @@ def watch(args: dict[str, str]) -> Path:
 
     from hgm_repro.evaluation.media import record_gif
     from hgm_repro.experiment.checkpoint import CheckpointMismatchError
+    from hgm_repro.experiment.schema import validate
+    from hgm_repro.simulator.config import ConfigError
 
     if args["run_id"]:
         cfg, checkpoint = _from_run(args["run_id"], args["tracking_uri"])
@@ -186,7 +188,11 @@ def watch(args: dict[str, str]) -> Path:
     out = Path(args["out"]) / (f"watch_{cfg.model.name}_seed{cfg.seed}_scenario{args['scenario']}"
                                f"_traffic{args['seed']}.{fmt}")
     try:
-        metrics = record_gif(cfg, checkpoint, out, seed=int(args["seed"]), panels=True,
+        job = validate(cfg)
+    except ConfigError as error:
+        raise WatchError(str(error)) from None
+    try:
+        metrics = record_gif(job, checkpoint, out, seed=int(args["seed"]), panels=True,
                              max_decisions=int(args["steps"]) if args["steps"] else None)
     except CheckpointMismatchError as error:
         raise WatchError(f"{error}\nTo watch this checkpoint, leave model= out (it names its own model).") from None

@@ -30,29 +30,28 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from incidents import COLLISION_KINDS, DANGER_KINDS, drive_and_classify  # noqa: E402
 
 from baselines.drivers import IdmMobilDriver  # noqa: E402
+from hgm_repro.experiment.schema import JobConfig, validate  # noqa: E402
 from hgm_repro.learner.builders import make_network  # noqa: E402
-from hgm_repro.observations import ObservationBuilder, ObservationConfig  # noqa: E402
+from hgm_repro.observations import ObservationBuilder  # noqa: E402
 from hgm_repro.simulator import HOST, HighwaySimulator  # noqa: E402
 from hgm_repro.simulator.driver import attach  # noqa: E402
-from hgm_repro.simulator.loading import scenario_config, simulator_config  # noqa: E402
 
 CONF = Path(__file__).resolve().parents[1] / "conf"
 
 
-def compose_cfg(overrides: list[str]):
+def compose_job(overrides: list[str]) -> JobConfig:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return compose("config", overrides=overrides)
+        return validate(compose("config", overrides=overrides))
 
 
-def make_sim(cfg, n_envs: int, seed: int) -> HighwaySimulator:
-    sim_cfg = simulator_config(cfg.simulator)
-    return HighwaySimulator(sim_cfg, scenario_config(cfg.train_scenario, sim_cfg), n_envs=n_envs, seed=seed)
+def make_sim(job: JobConfig, n_envs: int, seed: int) -> HighwaySimulator:
+    return HighwaySimulator(job.simulator, job.train_scenario, n_envs=n_envs, seed=seed)
 
 
-def learned_host(cfg, checkpoint: Path, n_envs: int, decisions: int, seed: int):
-    sim = make_sim(cfg, n_envs, seed)
-    builder = ObservationBuilder(sim, ObservationConfig.from_config(cfg.observation, cfg.model.streams))
-    net = make_network(cfg)
+def learned_host(job: JobConfig, checkpoint: Path, n_envs: int, decisions: int, seed: int):
+    sim = make_sim(job, n_envs, seed)
+    builder = ObservationBuilder(sim, job.observation)
+    net = make_network(job)
     # The weights only: the caller passes the overrides the checkpoint was trained with (a checkpoint
     # from before a config field existed would fail the strict config comparison).
     net.load_state_dict(torch.load(checkpoint, map_location="cpu", weights_only=False)["network"])
@@ -74,23 +73,23 @@ def learned_host(cfg, checkpoint: Path, n_envs: int, decisions: int, seed: int):
     return table, rates, torch.cat(host_speeds)
 
 
-def rule_host(cfg, n_envs: int, decisions: int, seed: int):
-    sim = make_sim(cfg, n_envs, seed)
+def rule_host(job: JobConfig, n_envs: int, decisions: int, seed: int):
+    sim = make_sim(job, n_envs, seed)
     driver = attach(IdmMobilDriver(safety_layer=False), sim)  # inside the host's own Table 1 limits
     sim.reset()
     return drive_and_classify(sim, lambda: driver.act(sim), decisions)
 
 
-def camera_resolution(cfg) -> pd.DataFrame:
+def camera_resolution(job: JobConfig) -> pd.DataFrame:
     """Rows a car ahead covers in the front camera, and how many rows it grows by in one decision
     while closing at 2 m/s, against the gap; at the preset's image size and at the paper's 84."""
-    obs = cfg.observation
+    obs = job.observation
     rows = []
-    for side in sorted({int(obs.width), 84}):
-        f = (side / 2) / math.tan(math.radians(float(obs.camera_fov_deg)) / 2)
+    for side in sorted({obs.width, 84}):
+        f = (side / 2) / math.tan(math.radians(obs.camera_fov_deg) / 2)
         for gap in (5.0, 7.5, 10.0, 15.0, 20.0, 30.0, 40.0):
-            tall = f * float(obs.get("vehicle_height", 1.5)) / gap
-            grow = f * float(obs.get("vehicle_height", 1.5)) * (1 / (gap - 1.0) - 1 / gap)
+            tall = f * obs.vehicle_height / gap
+            grow = f * obs.vehicle_height * (1 / (gap - 1.0) - 1 / gap)
             wide = f * 1.8 / gap
             rows.append({"image_side": side, "gap_m": gap, "rows_tall": tall, "columns_wide": wide,
                          "rows_grown_per_decision_at_2mps": grow})
@@ -116,19 +115,19 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--out", type=Path, default=Path("docs/study"))
     a = p.parse_args(argv)
     torch.set_num_threads(1)
-    cfg = compose_cfg(a.overrides)
+    job = compose_job(a.overrides)
     a.out.mkdir(parents=True, exist_ok=True)
 
-    learned_table, learned_rates, speeds = learned_host(cfg, a.checkpoint, a.envs, a.decisions, a.seed)
-    rule_table, rule_rates = rule_host(cfg, a.envs, a.decisions, a.seed)
+    learned_table, learned_rates, speeds = learned_host(job, a.checkpoint, a.envs, a.decisions, a.seed)
+    rule_table, rule_rates = rule_host(job, a.envs, a.decisions, a.seed)
     rates = pd.DataFrame([{"host": "learned (proposed)", **learned_rates},
                           {"host": "IDM + MOBIL, host limits", **rule_rates}])
     rates.to_csv(a.out / "plateau_incident_rates.csv", index=False)
     pd.concat([learned_table.assign(host="learned"), rule_table.assign(host="idm_mobil")]).to_csv(
         a.out / "plateau_collisions.csv", index=False)
-    cam = camera_resolution(cfg)
+    cam = camera_resolution(job)
     cam.to_csv(a.out / "plateau_camera_resolution.csv", index=False)
-    sim_cfg = simulator_config(cfg.simulator)
+    sim_cfg = job.simulator
     contrast = hgm_host_contrast(speeds, sim_cfg.v_min, sim_cfg.v_max)
     contrast.describe().to_csv(a.out / "plateau_hgm_host_contrast.csv")
 

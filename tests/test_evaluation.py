@@ -10,15 +10,16 @@ from hgm_repro.evaluation import EPISODE_METRICS, evaluate
 from hgm_repro.evaluation.episodes import episodes_per_env
 from hgm_repro.experiment.checkpoint import CheckpointMismatchError
 from hgm_repro.learner import train
+from hgm_repro.simulator.loading import scenario_config
 
-from .test_learner import Recorder, compose_cfg
+from .test_learner import Recorder, compose_job
 
 MEANS = {f"eval/{k}" for k in EPISODE_METRICS}
 
 
 @pytest.fixture(scope="module")
 def checkpoint(tmp_path_factory):
-    return train(compose_cfg(), tmp_path_factory.mktemp("eval"), Recorder())
+    return train(compose_job(), tmp_path_factory.mktemp("eval"), Recorder())
 
 
 def check_result(result, n_envs: int, per_env: int) -> None:
@@ -41,23 +42,23 @@ def test_budget_rounds_up_to_whole_episodes_per_env():
 
 def test_learned_model_greedy_evaluation(checkpoint):
     # smoke episodes last 10 s = 20 decisions: 120 decisions over 4 envs = 2 episodes per env.
-    cfg = compose_cfg("learner.test_steps=120")
-    result = evaluate(cfg, cfg.scenario, checkpoint)
+    job = compose_job("learner.test_steps=120")
+    result = evaluate(job, job.scenario, checkpoint)
     check_result(result, n_envs=4, per_env=2)
     assert (result.episodes["decisions"] <= 20).all()
 
 
 def test_human_driven_host_evaluation():
-    cfg = compose_cfg("model=human", "learner.test_steps=120")
-    result = evaluate(cfg, "1", None)  # scenario 1 by name (CV ratio 0)
+    job = compose_job("model=human", "learner.test_steps=120")
+    result = evaluate(job, scenario_config("1", job.simulator), None)  # scenario 1 (CV ratio 0)
     check_result(result, n_envs=4, per_env=2)
     assert result.means["eval/collisions"] == 0.0  # the human host keeps the NPC safety layer
     assert (result.episodes["decisions"] == 20).all()  # so every episode runs its full length
 
 
 def test_a_tiny_budget_still_counts_only_complete_episodes():
-    cfg = compose_cfg("model=human", "learner.test_steps=8")
-    result = evaluate(cfg, cfg.scenario, None)
+    job = compose_job("model=human", "learner.test_steps=8")
+    result = evaluate(job, job.scenario, None)
     check_result(result, n_envs=4, per_env=1)
     assert (result.episodes["decisions"] == 20).all()
 
@@ -69,8 +70,8 @@ def test_every_host_meets_the_same_initial_traffic(checkpoint):
 
     states = []
     for model in ("human", "random"):
-        cfg = compose_cfg(f"model={model}")
-        env = make_env(cfg, cfg.scenario, n_envs=4, seed=0)
+        job = compose_job(f"model={model}")
+        env = make_env(job, job.scenario, n_envs=4, seed=0)
         env.simulator.generator.manual_seed(_traffic_seed(7, 0, 3))
         env.reset()
         states.append(env.simulator.state.pos_lon.clone())
@@ -84,11 +85,12 @@ def test_every_host_meets_the_same_initial_traffic(checkpoint):
 
 def test_evaluation_refuses_another_models_checkpoint(checkpoint):
     with pytest.raises(CheckpointMismatchError, match="'proposed'"):
-        evaluate(compose_cfg("model=min"), "train", checkpoint)
+        job = compose_job("model=min")
+        evaluate(job, job.train_scenario, checkpoint)
 
 
 def test_evaluation_accepts_other_test_settings(checkpoint):
     # Tested in another scenario with other test budgets: the same weights load.
-    cfg = compose_cfg("learner.test_envs=2", "learner.test_steps=40", "learner.lr=0.5")
-    result = evaluate(cfg, "5", checkpoint)
+    job = compose_job("learner.test_envs=2", "learner.test_steps=40", "learner.lr=0.5")
+    result = evaluate(job, scenario_config("5", job.simulator), checkpoint)
     assert len(result.episodes) == 2 * episodes_per_env(40, 2, 20)

@@ -11,6 +11,7 @@ from omegaconf import DictConfig
 
 from hgm_repro import CONF_DIR
 from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint
+from hgm_repro.experiment.schema import JobConfig, validate
 from hgm_repro.learner import NonFiniteLossError, train
 from hgm_repro.learner import dqn as dqn_module
 from hgm_repro.learner.priority_trees import MinTree, SumTree
@@ -32,6 +33,11 @@ def compose_cfg(*overrides: str) -> DictConfig:
         return cfg
 
 
+def compose_job(*overrides: str) -> JobConfig:
+    """`compose_cfg(*overrides)`, validated: the typed config `train`, `evaluate` and `make_env` take."""
+    return validate(compose_cfg(*overrides))
+
+
 class Recorder:
     """A `log` callable that keeps what it was given."""
 
@@ -49,8 +55,8 @@ class Recorder:
 
 
 @pytest.fixture(scope="module")
-def trained(tmp_path_factory) -> tuple[DictConfig, Path, Recorder]:
-    cfg = compose_cfg()
+def trained(tmp_path_factory) -> tuple[JobConfig, Path, Recorder]:
+    cfg = compose_job()
     log = Recorder()
     final = train(cfg, tmp_path_factory.mktemp("smoke"), log)
     return cfg, final, log
@@ -87,7 +93,7 @@ def test_finished_run_returns_its_final_checkpoint(trained):
 
 
 def test_killed_run_resumes_from_last_and_stops_at_the_same_step(tmp_path):
-    cfg = compose_cfg()
+    cfg = compose_job()
     with pytest.raises(KeyboardInterrupt):
         train(cfg, tmp_path, Recorder(stop_at=96))  # killed after the step-64 checkpoint
     assert not (tmp_path / "final.pt").exists()
@@ -106,11 +112,11 @@ def test_killed_run_resumes_from_last_and_stops_at_the_same_step(tmp_path):
 
 def test_checkpoint_from_another_model_is_refused(trained, tmp_path):
     _, final, _ = trained
-    other = compose_cfg("model=min")
+    other = compose_job("model=min")
     with pytest.raises(CheckpointMismatchError, match=r"'proposed'.*'min'"):
         train(other, final.parent, Recorder())
     with pytest.raises(CheckpointMismatchError, match="learner.lr"):
-        train(compose_cfg("learner.lr=0.1"), final.parent, Recorder())
+        train(compose_job("learner.lr=0.1"), final.parent, Recorder())
 
 
 def test_nan_loss_stops_the_run_and_keeps_checkpoints(tmp_path, monkeypatch):
@@ -127,7 +133,7 @@ def test_nan_loss_stops_the_run_and_keeps_checkpoints(tmp_path, monkeypatch):
         return nan_update
 
     monkeypatch.setattr(dqn_module, "make_update", poisoned)
-    cfg = compose_cfg("learner.checkpoint_every=16")
+    cfg = compose_job("learner.checkpoint_every=16")
     log = Recorder()
     with pytest.raises(NonFiniteLossError, match="env step 32"):
         train(cfg, tmp_path, log)
@@ -147,11 +153,11 @@ def test_priority_trees_sample_in_proportion():
 def test_cuda_graph_is_ignored_with_a_warning_on_cpu():
     from hgm_repro.learner.builders import make_actor, make_loss, make_network, make_update
 
-    cfg = compose_cfg("learner.cuda_graph=true")
-    loss = make_loss(cfg, make_actor(make_network(cfg)))
+    job = compose_job("learner.cuda_graph=true")
+    loss = make_loss(job.learner, make_actor(make_network(job)))
     optimizer = torch.optim.Adam(loss.parameters(), lr=1e-3)
     with pytest.warns(UserWarning, match="cuda_graph"):
-        update = make_update(cfg, loss, optimizer, torch.device("cpu"))
+        update = make_update(job.learner, loss, optimizer, torch.device("cpu"))
     assert callable(update)
 
 
@@ -159,6 +165,6 @@ def test_cuda_graph_is_ignored_with_a_warning_on_cpu():
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 @pytest.mark.parametrize("options", [[], ["learner.cuda_graph=true"], ["learner.compile=true"]])
 def test_smoke_training_on_cuda(tmp_path, options):
-    cfg = compose_cfg("device=cuda", *options)
+    cfg = compose_job("device=cuda", *options)
     state = load_checkpoint(train(cfg, tmp_path, Recorder()), cfg)
     assert state["env_steps"] == 128 and state["finished"]

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import copy
 
-import hydra.utils
 import pytest
 import torch
 from hydra import compose, initialize_config_dir
@@ -13,7 +12,8 @@ from torch import nn
 from baselines.coordinate_net import CoordinateDuelingQNet
 from baselines.min_net import MinDuelingQNet
 from hgm_repro import CONF_DIR
-from hgm_repro.learner.builders import network_kwargs
+from hgm_repro.experiment.schema import validate
+from hgm_repro.learner.builders import make_network
 from hgm_repro.networks import (
     DuelingHead,
     TwoStreamDuelingQNet,
@@ -127,9 +127,9 @@ def test_coordinate_net_reads_camera_and_v2x_vector():
                                          ("coordinate", ["camera", "coordinates"])])
 def test_every_model_config_builds_its_network(model, keys):
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        cfg = compose("config", overrides=[f"model={model}", "observation.height=36", "observation.width=36"])
-    net = hydra.utils.instantiate(cfg.model.network, **network_kwargs(cfg))
+        job = validate(compose("config", overrides=[f"model={model}", "observation.height=36", "observation.width=36"]))
+    net = make_network(job)
     assert net.in_keys == keys
-    assert set(keys) <= {k for k, v in cfg.model.streams.items() if v not in ("none", False)} | {"coordinates"}
+    assert set(keys) <= {k for k, v in job.model.streams.items() if v not in ("none", False)} | {"coordinates"}
     counts = param_counts(net)
     assert counts["params/total"] == sum(v for k, v in counts.items() if k != "params/total")

@@ -10,12 +10,13 @@ from torchrl.envs.utils import check_env_specs
 
 from hgm_repro import CONF_DIR
 from hgm_repro.envs import make_env
+from hgm_repro.experiment.schema import JobConfig, validate
 from hgm_repro.simulator import N_ACTIONS
 
 
-def _cfg(*overrides: str):
+def _cfg(*overrides: str) -> JobConfig:
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return compose("config", overrides=["experiment=smoke", *overrides])
+        return validate(compose("config", overrides=["experiment=smoke", *overrides]))
 
 
 @pytest.mark.parametrize("model, keys", [
@@ -56,7 +57,7 @@ def test_partial_reset_only_touches_the_masked_envs():
 def test_episode_metrics_and_reward_terms_arrive_at_done():
     cfg = _cfg("model=proposed")
     env = make_env(cfg, cfg.train_scenario, n_envs=2, seed=1)
-    decisions = int(cfg.simulator.episode_seconds / cfg.simulator.decision_dt)
+    decisions = cfg.simulator.episode_decisions
     no_action = torch.zeros(2, N_ACTIONS, dtype=torch.bool)
     no_action[:, 4] = True
     td = env.reset()

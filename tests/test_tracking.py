@@ -15,10 +15,10 @@ from omegaconf import DictConfig
 from hgm_repro import CONF_DIR
 from hgm_repro.experiment.interrupts import JobInterrupted
 from hgm_repro.experiment.job import RUN_ID_FILE, run_job
-from hgm_repro.experiment.schema import validate
+from hgm_repro.experiment.schema import JobConfig, validate
 from hgm_repro.experiment.tracking import Tracker, flatten, git_info, resolve_location, retry, tidy_number
 from hgm_repro.experiment.train_key import train_key
-from hgm_repro.simulator.config import ConfigError
+from hgm_repro.simulator.config import ConfigError, ScenarioConfig
 
 
 def make_cfg(*overrides: str) -> DictConfig:
@@ -50,11 +50,11 @@ class FakeLearner:
         self.calls: list[Path] = []
         self.interrupt_after = interrupt_after
 
-    def __call__(self, cfg: DictConfig, checkpoint_dir: Path, log) -> Path:
+    def __call__(self, job: JobConfig, checkpoint_dir: Path, log) -> Path:
         self.calls.append(checkpoint_dir)
         last = checkpoint_dir / "last.pt"
         start = int(last.read_text()) if last.exists() else 0
-        for step in range(start + 64, int(cfg.learner.total_steps) + 1, 64):
+        for step in range(start + 64, job.learner.total_steps + 1, 64):
             log({"train/loss": 1.0 / step, "train/episode_return": float(step)}, step)
             last.write_text(str(step))
             if self.interrupt_after is not None and step >= self.interrupt_after:
@@ -65,7 +65,7 @@ class FakeLearner:
         return final
 
 
-def fake_evaluate(cfg: DictConfig, scenario, checkpoint: Path | None) -> SimpleNamespace:
+def fake_evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) -> SimpleNamespace:
     episodes = pd.DataFrame({"avg_speed_kmh": [60.0, 62.0], "episode_return": [10.0, 12.0]})
     return SimpleNamespace(episodes=episodes, means={"eval/avg_speed_kmh": 61.0, "eval/episode_return": 11.0})
 
@@ -86,6 +86,9 @@ def test_train_key_ignores_test_scenario_tracking_and_device() -> None:
     assert base != train_key(make_cfg("model=min"))
     assert base != train_key(make_cfg("learner.lr=0.001"))
     assert base != train_key(make_cfg("scenario@train_scenario='5'"))
+    # The typed config a job hands on carries the same identity as the tree it was validated from.
+    for overrides in ((), ("model=min", "seed=3"), ("model=human",)):
+        assert train_key(validate(make_cfg(*overrides))) == train_key(make_cfg(*overrides))
     assert len(base) == 12 and int(base, 16) >= 0
 
 
@@ -221,21 +224,21 @@ class ValidatingLearner(FakeLearner):
         super().__init__()
         self.returns, self.keep_best = returns, keep_best
 
-    def __call__(self, cfg: DictConfig, checkpoint_dir: Path, log) -> Path:
+    def __call__(self, job: JobConfig, checkpoint_dir: Path, log) -> Path:
         for step, value in enumerate(self.returns, start=1):
             log({"val/episode_return": value}, 64 * step)
         if self.keep_best:
             (checkpoint_dir / "best.pt").write_text("best weights")
-        return super().__call__(cfg, checkpoint_dir, log)
+        return super().__call__(job, checkpoint_dir, log)
 
 
 class RecordingEvaluate:
     def __init__(self) -> None:
         self.checkpoints: list[Path | None] = []
 
-    def __call__(self, cfg: DictConfig, scenario, checkpoint: Path | None) -> SimpleNamespace:
+    def __call__(self, job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) -> SimpleNamespace:
         self.checkpoints.append(checkpoint)
-        return fake_evaluate(cfg, scenario, checkpoint)
+        return fake_evaluate(job, scenario, checkpoint)
 
 
 VALIDATION_ON = "learner.eval_every=64"
@@ -297,11 +300,11 @@ def test_system_metrics_on_request(launch: Path, monkeypatch: pytest.MonkeyPatch
     monkeypatch.setenv("MLFLOW_SYSTEM_METRICS_SAMPLING_INTERVAL", "0.2")
 
     class SlowLearner(FakeLearner):
-        def __call__(self, cfg, checkpoint_dir, log):
+        def __call__(self, job, checkpoint_dir, log):
             import time
 
             time.sleep(1.5)
-            return super().__call__(cfg, checkpoint_dir, log)
+            return super().__call__(job, checkpoint_dir, log)
 
     outcome = run_job(make_cfg("tracking.system_metrics=true"), launch, train_fn=SlowLearner(),
                       evaluate_fn=fake_evaluate)

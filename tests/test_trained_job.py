@@ -96,18 +96,19 @@ def test_logged_model_gives_the_checkpoints_greedy_actions(job) -> None:
     from omegaconf import OmegaConf
 
     from hgm_repro.evaluation.policies import trained_network
-    from hgm_repro.observations import ObservationBuilder, ObservationConfig
+    from hgm_repro.experiment.schema import validate
+    from hgm_repro.observations import ObservationBuilder
     from hgm_repro.simulator import HighwaySimulator
-    from hgm_repro.simulator.loading import scenario_config, simulator_config
+    from hgm_repro.simulator.loading import scenario_config
 
     mlflow.set_tracking_uri(f"sqlite:///{job.launch}/mlflow.db")
     logged = mlflow.pytorch.load_model(f"runs:/{job.train.info.run_id}/model")
     cfg = OmegaConf.load(job.client.download_artifacts(job.train.info.run_id, "config.yaml", str(job.launch)))
-    reference = trained_network(cfg, job.checkpoint, torch.device("cpu"))
+    typed = validate(cfg)
+    reference = trained_network(typed, job.checkpoint, torch.device("cpu"))
 
-    sim_cfg = simulator_config(cfg.simulator)
-    sim = HighwaySimulator(sim_cfg, scenario_config("3", sim_cfg), n_envs=32, seed=5)
-    builder = ObservationBuilder(sim, ObservationConfig.from_config(cfg.observation, cfg.model.streams))
+    sim = HighwaySimulator(typed.simulator, scenario_config("3", typed.simulator), n_envs=32, seed=5)
+    builder = ObservationBuilder(sim, typed.observation)
     obs = builder.reset()
     for _ in range(3):
         sim.step(sim.npc_actions(sim.state)[:, 0])

@@ -16,19 +16,15 @@ _LAZY = {"HeterogeneousHighwayGymEnv": ".gym_env", "HeterogeneousHighwayVectorEn
          "HeterogeneousHighwayEnv": ".torchrl_env"}
 
 
-def make_env(cfg: Any, scenario_node: Any, n_envs: int, seed: int) -> Any:
-    """The TorchRL env for a composed Hydra root config, in the traffic of `scenario_node`."""
+def make_env(job: Any, scenario: Any, n_envs: int, seed: int) -> Any:
+    """The TorchRL env for `job` (a validated `JobConfig`) in the traffic of `scenario` (a `ScenarioConfig`,
+    usually `job.scenario` or `job.train_scenario`)."""
     import torch
 
-    from ..observations import ObservationConfig
-    from ..simulator.loading import scenario_config, simulator_config
     from .torchrl_env import HeterogeneousHighwayEnv
 
-    sim_cfg = simulator_config(cfg.simulator)
-    scenario = scenario_config(scenario_node, sim_cfg)
-    obs_cfg = ObservationConfig.from_config(cfg.observation, cfg.model.streams)
-    return HeterogeneousHighwayEnv(sim_cfg, scenario, obs_cfg, n_envs=n_envs, device=torch.device(cfg.device),
-                                   seed=seed)
+    return HeterogeneousHighwayEnv(job.simulator, scenario, job.observation, n_envs=n_envs,
+                                   device=torch.device(job.device), seed=seed)
 
 
 def __getattr__(name: str) -> Any:

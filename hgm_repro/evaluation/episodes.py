@@ -2,7 +2,7 @@
 the same traffic (see `evaluate`); one row per episode.
 
 A learned model runs its greedy policy (no exploration) from a checkpoint; a non-learning model
-(`cfg.model.learned == false`: the human-driven host, IDM + MOBIL, random) drives the host
+(`job.model.learned == false`: the human-driven host, IDM + MOBIL, random) drives the host
 through its driver object. Both go through the same TorchRL env and the same loop, so their
 metrics are computed identically: the env's per-episode `episode` outputs, read where `done`.
 """
@@ -16,15 +16,15 @@ from pathlib import Path
 
 import pandas as pd
 import torch
-from omegaconf import DictConfig
 from tensordict import TensorDict, TensorDictBase
 from torch.nn import functional as F
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
 from ..envs import make_env
 from ..experiment.interrupts import raise_if_pending
+from ..experiment.schema import JobConfig
 from ..metrics import EPISODE_METRICS
-from ..simulator import N_ACTIONS
+from ..simulator import N_ACTIONS, ScenarioConfig
 from .policies import attached_driver, trained_network
 
 # Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
@@ -58,14 +58,14 @@ def _traffic_seed(base: int, stream: int, index: int) -> int:
 Policy = Callable[[TensorDictBase], TensorDictBase]
 
 
-def _learned_policy(cfg: DictConfig, checkpoint: Path | None, device: torch.device) -> Policy:
+def _learned_policy(job: JobConfig, checkpoint: Path | None, device: torch.device) -> Policy:
     from ..learner.builders import make_actor
 
-    return make_actor(trained_network(cfg, checkpoint, device)).to(device)
+    return make_actor(trained_network(job, checkpoint, device)).to(device)
 
 
-def _driver_policy(cfg: DictConfig, env) -> Policy:
-    driver = attached_driver(cfg, env.simulator)
+def _driver_policy(job: JobConfig, env) -> Policy:
+    driver = attached_driver(job, env.simulator)
 
     def policy(td: TensorDictBase) -> TensorDictBase:
         action = driver.act(env.simulator)
@@ -124,19 +124,19 @@ def episode_means(episodes: pd.DataFrame, prefix: str) -> dict[str, float]:
     return means
 
 
-def evaluate(cfg: DictConfig, scenario_node, checkpoint: Path | None) -> EvaluationResult:
-    """The fair test in `scenario_node`'s traffic: each of `learner.test_envs` envs drives the same
+def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) -> EvaluationResult:
+    """The fair test in `scenario`'s traffic (usually `job.scenario`): each of `learner.test_envs` envs drives the same
     number of complete episodes (`episodes_per_env`, at least `learner.test_steps` decisions in
     all), only complete episodes count, and every model of a seed meets the same traffic
     (`run_episodes`)."""
-    device = torch.device(cfg.device)
-    if int(cfg.learner.get("torch_threads", 0)) > 0:
-        torch.set_num_threads(int(cfg.learner.torch_threads))
-    n_envs = int(cfg.learner.test_envs)
-    traffic = int(cfg.seed) + EVAL_SEED_OFFSET
-    env = make_env(cfg, scenario_node, n_envs=n_envs, seed=traffic)
-    policy = _learned_policy(cfg, checkpoint, device) if cfg.model.get("learned", True) else _driver_policy(cfg, env)
-    quota = episodes_per_env(int(cfg.learner.test_steps), n_envs, env.simulator.config.episode_decisions)
+    device = torch.device(job.device)
+    if job.learner.torch_threads > 0:
+        torch.set_num_threads(job.learner.torch_threads)
+    n_envs = job.learner.test_envs
+    traffic = job.seed + EVAL_SEED_OFFSET
+    env = make_env(job, scenario, n_envs=n_envs, seed=traffic)
+    policy = _learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
+    quota = episodes_per_env(job.learner.test_steps, n_envs, env.simulator.config.episode_decisions)
     episodes = run_episodes(env, policy, quota, traffic)
     env.close()
     return EvaluationResult(episodes=episodes, means=episode_means(episodes, "eval"),

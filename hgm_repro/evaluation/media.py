@@ -12,13 +12,12 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from omegaconf import DictConfig
 
 from ..envs.render import render_watch_frame
 from ..envs.video import record_episode
-from ..observations import ObservationBuilder, ObservationConfig
+from ..experiment.schema import JobConfig
+from ..observations import ObservationBuilder
 from ..simulator import HighwaySimulator
-from ..simulator.loading import scenario_config, simulator_config
 from .policies import attached_driver, trained_network
 
 # Film a different episode than evaluation's first one, but the same one on every run of the job.
@@ -31,9 +30,9 @@ class GreedyPolicy:
     Keeps what it last saw (`observation`) and computed (`action_values` [N, 5]) for the frame
     that shows the decision."""
 
-    def __init__(self, cfg: DictConfig, checkpoint: Path, sim: HighwaySimulator) -> None:
-        self.net = trained_network(cfg, checkpoint, torch.device(cfg.device))
-        self.builder = ObservationBuilder(sim, ObservationConfig.from_config(cfg.observation, cfg.model.streams))
+    def __init__(self, job: JobConfig, checkpoint: Path, sim: HighwaySimulator) -> None:
+        self.net = trained_network(job, checkpoint, torch.device(job.device))
+        self.builder = ObservationBuilder(sim, job.observation)
         self.calls = 0
         self.observation: dict[str, torch.Tensor] = {}
         self.action_values = torch.empty(0)
@@ -53,21 +52,19 @@ class GreedyPolicy:
                                   action, caption)
 
 
-def record_gif(cfg: DictConfig, checkpoint: Path | None, path: Path, seed: int | None = None,
+def record_gif(job: JobConfig, checkpoint: Path | None, path: Path, seed: int | None = None,
                panels: bool = False, max_decisions: int | None = None) -> dict[str, float]:
-    """Drive one episode of `cfg.scenario` with the job's host, save it at `path` (.gif or .mp4)
+    """Drive one episode of `job.scenario` with the job's host, save it at `path` (.gif or .mp4)
     and return the episode's metrics. The traffic comes from `seed` (default: the job's seed plus
     GIF_SEED_OFFSET). `panels` (learned hosts): every frame shows the network's inputs and Q-values."""
-    sim_cfg = simulator_config(cfg.simulator)
-    seed = int(cfg.seed) + GIF_SEED_OFFSET if seed is None else int(seed)
-    sim = HighwaySimulator(sim_cfg, scenario_config(cfg.scenario, sim_cfg), n_envs=1, device=str(cfg.device),
-                           seed=seed)
+    seed = job.seed + GIF_SEED_OFFSET if seed is None else seed
+    sim = HighwaySimulator(job.simulator, job.scenario, n_envs=1, device=job.device, seed=seed)
     render = None
-    if cfg.model.learned:
+    if job.model.learned:
         if checkpoint is None:
-            raise ValueError(f"learned model {cfg.model.name!r} has no checkpoint to film")
-        host = GreedyPolicy(cfg, checkpoint, sim)
+            raise ValueError(f"learned model {job.model.name!r} has no checkpoint to film")
+        host = GreedyPolicy(job, checkpoint, sim)
         render = host.render if panels else None
     else:
-        host = attached_driver(cfg, sim)
+        host = attached_driver(job, sim)
     return record_episode(sim, host, path, max_decisions=max_decisions, render=render)

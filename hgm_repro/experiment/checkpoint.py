@@ -13,9 +13,9 @@ from pathlib import Path
 from typing import Any
 
 import torch
-from omegaconf import DictConfig
 
 from .config_tree import flatten
+from .schema import JobConfig
 from .train_key import train_key, training_config
 
 CHECKPOINT_FORMAT = 1
@@ -31,9 +31,9 @@ class CheckpointMismatchError(RuntimeError):
     """A checkpoint was written for another model or training config than the one asked for."""
 
 
-def recorded_training_config(cfg: DictConfig) -> dict[str, Any]:
-    """What a checkpoint records of `cfg`: its `training_config` as flat dotted keys."""
-    return flatten(training_config(cfg))
+def recorded_training_config(job: JobConfig) -> dict[str, Any]:
+    """What a checkpoint records of `job`: its `training_config` as flat dotted keys."""
+    return flatten(training_config(job))
 
 
 def _differences(saved: dict[str, Any], wanted: dict[str, Any], limit: int = 8) -> str:
@@ -44,25 +44,25 @@ def _differences(saved: dict[str, Any], wanted: dict[str, Any], limit: int = 8) 
     return "; ".join(diffs[:limit]) + more
 
 
-def check_compatible(checkpoint: dict[str, Any], cfg: DictConfig, path: Path, strict: bool = True) -> None:
-    """Stop with a message naming both sides when `checkpoint` does not belong to `cfg`.
+def check_compatible(checkpoint: dict[str, Any], job: JobConfig, path: Path, strict: bool = True) -> None:
+    """Stop with a message naming both sides when `checkpoint` does not belong to `job`.
 
     strict: the whole training config must match (resuming a run). Otherwise only the network's
     architecture and inputs must (evaluating weights in another scenario or with other test settings).
     """
     saved = checkpoint.get("training_config", {})
-    wanted = recorded_training_config(cfg)
+    wanted = recorded_training_config(job)
     if not strict:
         saved = {k: v for k, v in saved.items() if k.startswith(ARCHITECTURE_KEYS)}
         wanted = {k: v for k, v in wanted.items() if k.startswith(ARCHITECTURE_KEYS)}
     if saved == wanted:
         return
-    saved_model, wanted_model = checkpoint.get("model", "?"), cfg.model.name
+    saved_model, wanted_model = checkpoint.get("model", "?"), job.model.name
     what = "another model" if saved_model != wanted_model else "another training config"
     raise CheckpointMismatchError(
         f"checkpoint {path} is from {what}: it was trained for model '{saved_model}' "
         f"(train_key {checkpoint.get('train_key', '?')}), but this run is model '{wanted_model}' "
-        f"(train_key {train_key(cfg)}). Differences: "
+        f"(train_key {train_key(job)}). Differences: "
         f"{_differences(saved, wanted)}. Use another checkpoint directory, or delete this checkpoint to start over.")
 
 
@@ -76,15 +76,15 @@ def save_checkpoint(state: dict[str, Any], path: Path) -> Path:
     return path
 
 
-def load_checkpoint(path: Path, cfg: DictConfig | None = None, strict: bool = True,
+def load_checkpoint(path: Path, job: JobConfig | None = None, strict: bool = True,
                     map_location: str | torch.device = "cpu") -> dict[str, Any]:
-    """Read a checkpoint; with `cfg`, refuse one that does not belong to it (see `check_compatible`)."""
+    """Read a checkpoint; with `job`, refuse one that does not belong to it (see `check_compatible`)."""
     path = Path(path)
     # weights_only=False: the checkpoint also holds RNG states, schedules and (maybe) the replay
     # buffer, which are not plain tensors. Only load checkpoints this project wrote.
     checkpoint = torch.load(path, map_location=map_location, weights_only=False)
     if checkpoint.get("format") != CHECKPOINT_FORMAT:
         raise CheckpointMismatchError(f"{path} is not a hgm_repro checkpoint of format {CHECKPOINT_FORMAT}")
-    if cfg is not None:
-        check_compatible(checkpoint, cfg, path, strict=strict)
+    if job is not None:
+        check_compatible(checkpoint, job, path, strict=strict)
     return checkpoint

@@ -1,4 +1,4 @@
-"""One job: validate the config, train once per `train_key`, evaluate in `cfg.scenario`, log it all.
+"""One job: validate the config, train once per `train_key`, evaluate in the test scenario, log it all.
 
 Train once, evaluate many: training depends only on the training config (`train_key`), so a
 sweep over test scenarios trains each model and seed once. The job that gets the key's file
@@ -16,7 +16,7 @@ import tempfile
 import time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager, nullcontext
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -24,7 +24,7 @@ from filelock import FileLock, Timeout
 from omegaconf import DictConfig, OmegaConf
 
 from ..metrics import VALIDATION_RETURN
-from ..simulator.config import ConfigError
+from ..simulator.config import ConfigError, ScenarioConfig
 from .checkpoint import BEST_CHECKPOINT, FINAL_CHECKPOINT
 from .interrupts import JobInterrupted, raise_if_pending, sigterm_raises
 from .schema import JobConfig, validate
@@ -42,8 +42,8 @@ from .train_key import train_key, training_config
 
 log = logging.getLogger(__name__)
 
-TrainFn = Callable[[DictConfig, Path, Callable[[dict[str, float], int], None]], Path]
-EvaluateFn = Callable[[DictConfig, Any, "Path | None"], Any]
+TrainFn = Callable[[JobConfig, Path, Callable[[dict[str, float], int], None]], Path]
+EvaluateFn = Callable[[JobConfig, ScenarioConfig, "Path | None"], Any]
 RUN_ID_FILE = "mlflow_run_id"  # beside the checkpoints: the training run a resume continues
 CHECKPOINT_ARTIFACT = "checkpoint"
 
@@ -78,7 +78,7 @@ def hydra_job(cfg: DictConfig) -> float | None:
     single = None if multirun else " ".join(hydra_cfg.overrides.task)
     outcome = run_job(cfg, Path(get_original_cwd()), parent_run_id=parent, launch_overrides=single)
     # What a Hydra sweeper optimises: the validation return, never a test scenario's.
-    if multirun and outcome.validation_return is None and cfg.model.get("learned", True):
+    if multirun and outcome.validation_return is None and outcome.training.how != "none":
         log.warning("no %s in training run %s (validation off: learner.eval_every=0): a sweeper gets "
                     "nothing to optimise", VALIDATION_RETURN, outcome.training.run_id)
     return outcome.validation_return
@@ -95,11 +95,11 @@ def run_job(
     """One job. `launch_overrides` (the command line's overrides) makes it a launch of its own:
     a parent run groups its training and evaluation, as a sweep's parent run groups a sweep's."""
     job = validate(cfg)  # before anything touches the store, the disk or the simulator
-    key = train_key(cfg)
+    key = train_key(job)
     label = f"model={job.model.name} scenario={job.scenario.name} seed={job.seed} train_key={key}"
     log.info("job start: %s (experiment=%s, device=%s)", label, job.experiment.name, job.device)
     started = time.monotonic()
-    tracker = Tracker(resolve_location(cfg.tracking, launch_dir), job.tracking.experiment_name)
+    tracker = Tracker(resolve_location(asdict(job.tracking), launch_dir), job.tracking.experiment_name)
     for run_id in tracker.mark_orphans_killed(key):
         log.info("run %s was left RUNNING by a process that no longer exists: marked KILLED", run_id)
     serve = tracker.ui_command()
@@ -118,11 +118,11 @@ def run_job(
     try:
         with sigterm_raises(), (_run_status(tracker, launch_run) if launch_run else nullcontext()):
             if job.model.learned:
-                training = obtain_checkpoint(cfg, job, key, tracker, tags, parent_run_id, train_fn)
+                training = obtain_checkpoint(job, key, tracker, tags, parent_run_id, train_fn)
                 validation_return = tracker.best_value(training.run_id, VALIDATION_RETURN)
             else:
                 training = Training("none")
-            eval_run_id, means = evaluate_and_log(cfg, job, tracker, tags, parent_run_id, training, evaluate_fn)
+            eval_run_id, means = evaluate_and_log(job, tracker, tags, parent_run_id, training, evaluate_fn)
             if launch_run:
                 tracker.summarise_launch(launch_run, description)
     except JobInterrupted as interrupted:
@@ -138,7 +138,7 @@ def run_job(
 
 
 def obtain_checkpoint(
-    cfg: DictConfig, job: JobConfig, key: str, tracker: Tracker, tags: dict[str, Any],
+    job: JobConfig, key: str, tracker: Tracker, tags: dict[str, Any],
     parent_run_id: str | None, train_fn: TrainFn | None,
 ) -> Training:
     """The key's finished checkpoint: from the store if there is one, else by training now."""
@@ -163,7 +163,7 @@ def obtain_checkpoint(
                 return reused
             if job.force_retrain:
                 _clear_checkpoints(checkpoint_dir)
-        return _train(cfg, key, tracker, tags, parent_run_id, train_fn, checkpoint_dir, unfinished)
+        return _train(job, key, tracker, tags, parent_run_id, train_fn, checkpoint_dir, unfinished)
     finally:
         lock.release()
 
@@ -218,12 +218,12 @@ def _clear_checkpoints(checkpoint_dir: Path) -> None:
 
 
 def _train(
-    cfg: DictConfig, key: str, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None,
+    job: JobConfig, key: str, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None,
     train_fn: TrainFn | None, checkpoint_dir: Path, unfinished: str | None,
 ) -> Training:
     if train_fn is None:
         from ..learner import train as train_fn
-    job_tags = {**tags, "stage": "train", "scenario": str(cfg.train_scenario.name)}
+    job_tags = {**tags, "stage": "train", "scenario": job.train_scenario.name}
     if unfinished is not None:
         run_id, how = unfinished, "resumed"
         tracker.reopen(run_id)
@@ -235,45 +235,45 @@ def _train(
         from ..networks import param_counts
 
         how = "trained"
-        run_id = tracker.start_run(f"{cfg.model.name} seed{cfg.seed} training {key}", job_tags, parent_run_id,
-                                   description=_training_description(cfg, key, checkpoint_dir))
+        run_id = tracker.start_run(f"{job.model.name} seed{job.seed} training {key}", job_tags, parent_run_id,
+                                   description=_training_description(job, key, checkpoint_dir))
         (checkpoint_dir / RUN_ID_FILE).write_text(run_id)
-        tracker.log_params(run_id, {**flatten(training_config(cfg)),
-                                    **{k: str(v) for k, v in param_counts(make_network(cfg)).items()}})
-        tracker.log_text(run_id, OmegaConf.to_yaml(cfg, resolve=True), "config.yaml")
+        tracker.log_params(run_id, {**flatten(training_config(job)),
+                                    **{k: str(v) for k, v in param_counts(make_network(job)).items()}})
+        tracker.log_text(run_id, _config_yaml(job), "config.yaml")
 
     def log_to_run(metrics: dict[str, float], step: int) -> None:
         tracker.log_metrics(run_id, metrics, step)
 
     with _run_status(tracker, run_id):
-        with tracker.system_metrics(run_id, bool(cfg.tracking.get("system_metrics", False))):
-            checkpoint = Path(train_fn(cfg, checkpoint_dir, log_to_run)).resolve()
+        with tracker.system_metrics(run_id, job.tracking.system_metrics):
+            checkpoint = Path(train_fn(job, checkpoint_dir, log_to_run)).resolve()
         tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
         best = checkpoint.with_name(BEST_CHECKPOINT)
         if best.is_file():
             tracker.log_artifact(run_id, best, CHECKPOINT_ARTIFACT)
-        if cfg.tracking.get("log_model", True):
+        if job.tracking.log_model:
             import torch
 
             from ..evaluation.policies import trained_network
 
-            tracker.log_model(run_id, trained_network(cfg, checkpoint, torch.device("cpu")))
+            tracker.log_model(run_id, trained_network(job, checkpoint, torch.device("cpu")))
         tracker.set_tags(run_id, {"checkpoint_path": str(checkpoint)})
     return Training(how, run_id, checkpoint)
 
 
-def _training_description(cfg: DictConfig, key: str, checkpoint_dir: Path) -> str:
-    return (f"Training of **{cfg.model.name}** (seed {cfg.seed}) in the training traffic "
-            f"(`{cfg.train_scenario.name}`) for {cfg.learner.total_steps} env steps, experiment preset "
-            f"`{cfg.experiment.name}`, train_key `{key}`. Checkpoints in `{checkpoint_dir}`; the final network "
+def _training_description(job: JobConfig, key: str, checkpoint_dir: Path) -> str:
+    return (f"Training of **{job.model.name}** (seed {job.seed}) in the training traffic "
+            f"(`{job.train_scenario.name}`) for {job.learner.total_steps} env steps, experiment preset "
+            f"`{job.experiment.name}`, train_key `{key}`. Checkpoints in `{checkpoint_dir}`; the final network "
             "is also the MLflow model `model` of this run (`mlflow.pytorch.load_model`). Every evaluation of "
             "this training links here.")
 
 
-def checkpoint_to_evaluate(cfg: DictConfig, training: Training) -> Path | None:
+def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
     """`eval.checkpoint`: the final network (the paper's protocol) or the one with the best
     validation return, which training keeps as best.pt beside final.pt when validation is on."""
-    which = str(cfg.get("eval", {}).get("checkpoint", "final"))
+    which = job.eval.checkpoint
     if training.checkpoint is None or which == "final":
         return training.checkpoint
     best = training.checkpoint.with_name(BEST_CHECKPOINT)
@@ -304,25 +304,25 @@ def _run_status(tracker: Tracker, run_id: str) -> Iterator[None]:
 
 
 def evaluate_and_log(
-    cfg: DictConfig, job: JobConfig, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None,
+    job: JobConfig, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None,
     training: Training, evaluate_fn: EvaluateFn | None,
 ) -> tuple[str, dict[str, float]]:
     if evaluate_fn is None:
         from ..evaluation import evaluate as evaluate_fn
-    checkpoint = checkpoint_to_evaluate(cfg, training)  # before the run: a missing best.pt is a config error
+    checkpoint = checkpoint_to_evaluate(job, training)  # before the run: a missing best.pt is a config error
     eval_tags = {**tags, "stage": "eval", "scenario": job.scenario.name, "training": training.how}
     if training.run_id:
         eval_tags["train_run_id"] = training.run_id
     if checkpoint is not None:
         eval_tags["checkpoint"] = checkpoint.stem  # final or best
     name = f"{job.model.name} seed{job.seed} {scenario_label(job.scenario.name)} eval"
-    description = _evaluation_description(cfg, tracker, training, checkpoint)
+    description = _evaluation_description(job, tracker, training, checkpoint)
     run_id = tracker.start_run(name, eval_tags, parent_run_id, description=description)
     with _run_status(tracker, run_id):
-        tracker.log_params(run_id, flatten(cfg))
-        tracker.log_text(run_id, OmegaConf.to_yaml(cfg, resolve=True), "config.yaml")
+        tracker.log_params(run_id, flatten(job.resolved))
+        tracker.log_text(run_id, _config_yaml(job), "config.yaml")
         with tracker.system_metrics(run_id, job.tracking.system_metrics):
-            result = evaluate_fn(cfg, cfg.scenario, checkpoint)
+            result = evaluate_fn(job, job.scenario, checkpoint)
         means = {k: float(v) for k, v in result.means.items()}
         tracker.log_metrics(run_id, means, step=0)
         tracker.describe(run_id, description + "\n\n" + _results_sentence(means))
@@ -331,15 +331,15 @@ def evaluate_and_log(
             result.episodes.to_csv(episodes, index_label="episode")
             tracker.log_artifact(run_id, episodes)
             if job.tracking.log_gif:
-                _log_gif(cfg, checkpoint, tracker, run_id, Path(tmp))
+                _log_gif(job, checkpoint, tracker, run_id, Path(tmp))
     return run_id, means
 
 
-def _evaluation_description(cfg: DictConfig, tracker: Tracker, training: Training, checkpoint: Path | None) -> str:
-    scenario = cfg.scenario.name
+def _evaluation_description(job: JobConfig, tracker: Tracker, training: Training, checkpoint: Path | None) -> str:
+    scenario = job.scenario.name
     where = f"scenario {scenario}" if str(scenario).isdigit() else f"the `{scenario}` traffic"
-    text = (f"Evaluation of **{cfg.model.name}** (seed {cfg.seed}) in {where}: {cfg.learner.test_steps} greedy "
-            f"decisions over {cfg.learner.test_envs} envs, test traffic drawn from seeds no training uses.")
+    text = (f"Evaluation of **{job.model.name}** (seed {job.seed}) in {where}: {job.learner.test_steps} greedy "
+            f"decisions over {job.learner.test_envs} envs, test traffic drawn from seeds no training uses.")
     if training.run_id is None:
         return text + " A non-learning host: nothing was trained."
     link = tracker.run_link(training.run_id, f"training run {training.run_id[:8]}")
@@ -354,13 +354,18 @@ def _results_sentence(means: dict[str, float]) -> str:
     return "Results: " + ", ".join(parts) + "." if parts else ""
 
 
-def _log_gif(cfg: DictConfig, checkpoint: Path | None, tracker: Tracker, run_id: str, tmp: Path) -> None:
+def _config_yaml(job: JobConfig) -> str:
+    """The resolved config as a run's `config.yaml`."""
+    return OmegaConf.to_yaml(OmegaConf.create(job.resolved))
+
+
+def _log_gif(job: JobConfig, checkpoint: Path | None, tracker: Tracker, run_id: str, tmp: Path) -> None:
     """One evaluation episode as a GIF; optional, since a failed video must not fail a job."""
     from ..evaluation.media import record_gif
 
     path = tmp / "episode.gif"
     try:
-        record_gif(cfg, checkpoint, path)
+        record_gif(job, checkpoint, path)
     except Exception as error:  # rendering is a nicety, the metrics are logged already
         log.warning("episode GIF failed: %s", error)
         tracker.set_tags(run_id, {"gif": f"failed: {str(error)[:200]}"})

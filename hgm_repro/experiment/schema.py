@@ -77,6 +77,9 @@ class LearnerSchema:
     val_episodes: int = field(default=1, metadata=ge(1))
     n_step: int = field(default=1, metadata=ge(1))
     reward_scale: float = field(default=1.0, metadata=gt(0))
+    loss_function: Literal["l2", "l1", "smooth_l1"] = "l2"
+    checkpoint_buffer_max_mb: float = field(default=256.0, metadata=ge(0))
+    torch_threads: int = field(default=0, metadata=ge(0))
     compile: bool = False
     cuda_graph: bool = False
 
@@ -113,8 +116,13 @@ class ExperimentSchema:
 
 @dataclass(frozen=True)
 class JobConfig:
-    """What `validate` hands back: the typed parts plus the simulator's and the observation
-    builders' own validated configs."""
+    """What `validate` hands back, and what `train`, `evaluate` and `make_env` receive: the typed
+    parts plus the simulator's and the observation builders' own validated configs.
+
+    `model.network` / `model.driver` stay plain `_target_` mappings (Hydra instantiates them), and
+    `resolved` is the whole resolved tree as plain data: the training identity hashes it
+    (`train_key`), runs log it. No part reads a setting from `resolved`.
+    """
 
     seed: int
     device: str
@@ -128,6 +136,7 @@ class JobConfig:
     simulator: SimulatorConfig
     scenario: ScenarioConfig
     train_scenario: ScenarioConfig
+    resolved: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
 
 
 def _type_name(tp: Any) -> str:
@@ -220,7 +229,7 @@ def _check_device(device: Any, errors: list[str]) -> None:
 def _check_eval(evaluation: Any, model: Any, learner: Any, errors: list[str]) -> None:
     learned = isinstance(model, ModelSchema) and model.learned
     if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "best" and learned:
-        if isinstance(learner, Mapping) and not learner.get("eval_every", 0):
+        if isinstance(learner, LearnerSchema) and not learner.eval_every:
             errors.append("eval.checkpoint=best is not allowed with learner.eval_every=0: without validation "
                           "training keeps no best.pt (set learner.eval_every=N, or eval.checkpoint=final)")
 
@@ -259,7 +268,7 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
             f"must be >= learner.batch_size={learner.batch_size}"
         )
 
-    _check_eval(parts["eval"], parts["model"], root.get("learner"), errors)
+    _check_eval(parts["eval"], parts["model"], parts["learner"], errors)
     _check_tracking(parts["tracking"], errors)
 
     # The observation builders and the simulator own their rules; collect their messages with the others.
@@ -288,5 +297,5 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
         raise ConfigError("invalid config:\n  " + "\n  ".join(errors))
     return JobConfig(
         seed=seed, device=root["device"], force_retrain=root["force_retrain"], simulator=sim,
-        scenario=scenario, train_scenario=train_scenario, observation=observation, **parts,
+        scenario=scenario, train_scenario=train_scenario, observation=observation, resolved=root, **parts,
     )

@@ -17,6 +17,8 @@ from typing import Any
 
 from omegaconf import DictConfig, OmegaConf
 
+from .schema import JobConfig
+
 # Bump when the checkpoint format or the meaning of a training config changes, so that
 # old checkpoints are not silently reused by new code.
 TRAIN_KEY_VERSION = 1
@@ -33,9 +35,16 @@ NON_TRAINING_LEARNER_KEYS = frozenset(
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
 
 
-def training_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
-    """The part of the root config that training depends on, as plain resolved data."""
-    root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+def training_config(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str, Any]:
+    """The part of the root config that training depends on, as plain resolved data.
+
+    Read from the resolved tree (a `JobConfig`'s `resolved`), not from the typed fields, so
+    that keys no schema names (and the defaults a schema fills in) leave the key as it was.
+    """
+    if isinstance(cfg, JobConfig):
+        root = cfg.resolved
+    else:
+        root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
     model = root["model"]
     learner = {k: v for k, v in root["learner"].items() if k not in NON_TRAINING_LEARNER_KEYS}
     return {
@@ -49,7 +58,7 @@ def training_config(cfg: DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     }
 
 
-def train_key(cfg: DictConfig | Mapping[str, Any]) -> str:
+def train_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     """A short hex digest of `training_config(cfg)`; stable across runs and machines."""
     payload = json.dumps(training_config(cfg), sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(payload.encode()).hexdigest()[:KEY_LENGTH]

@@ -1,7 +1,8 @@
 """The learner: Dueling DQN with prioritized experience replay on TorchRL (Selected Algorithm, Table 4).
 
-`train(cfg, checkpoint_dir, log) -> Path` trains `cfg.model` on the training traffic and returns the
-final checkpoint (`checkpoint_dir/final.pt`). The parts are TorchRL's: `Collector` over the batched
+`train(job, checkpoint_dir, log) -> Path` trains `job.model` (`job`: the typed `JobConfig` that
+`hgm_repro.experiment.schema.validate` builds) on the training traffic and returns the final
+checkpoint (`checkpoint_dir/final.pt`). The parts are TorchRL's: `Collector` over the batched
 env (warm-up through its `init_random_frames`), `TensorDictPrioritizedReplayBuffer` on a
 `LazyTensorStorage` (priorities |TD error|, alpha `per_alpha`, beta annealed by `LinearScheduler`),
 `QValueActor` + `EGreedyModule`, `DQNLoss` with a delayed target and `HardUpdate`. When TorchRL's

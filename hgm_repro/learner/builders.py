@@ -7,7 +7,6 @@ from collections.abc import Callable
 
 import hydra.utils
 import torch
-from omegaconf import DictConfig
 from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
@@ -15,6 +14,8 @@ from torchrl.data import LazyTensorStorage, OneHot, TensorDictPrioritizedReplayB
 from torchrl.modules import EGreedyModule, QValueActor
 from torchrl.objectives import DQNLoss
 
+from ..experiment.schema import JobConfig, LearnerSchema
+from ..observations import ObservationConfig
 from ..simulator import N_ACTIONS
 from .priority_trees import install_if_missing
 
@@ -24,19 +25,18 @@ install_if_missing()
 PRIORITY_KEY = "td_error"
 
 
-def network_kwargs(cfg: DictConfig) -> dict:
+def network_kwargs(observation: ObservationConfig) -> dict:
     """Input sizes every network constructor receives, from the observation config."""
-    obs = cfg.observation
-    frames = int(obs.frame_stack)
-    return {"n_actions": N_ACTIONS, "in_channels": 3 * frames, "image_size": (int(obs.height), int(obs.width)),
-            "coord_dim": frames * int(obs.coord_k) * 6}
+    frames = observation.frame_stack
+    return {"n_actions": N_ACTIONS, "in_channels": 3 * frames, "image_size": (observation.height, observation.width),
+            "coord_dim": frames * observation.coord_k * 6}
 
 
-def make_network(cfg: DictConfig) -> nn.Module:
-    """The model's Q-network from `cfg.model.network` (`_target_`), sized for `cfg.observation`."""
-    if not cfg.model.get("learned", True) or cfg.model.get("network") is None:
-        raise ValueError(f"model '{cfg.model.name}' is not a learned model: it has no network to train")
-    return hydra.utils.instantiate(cfg.model.network, **network_kwargs(cfg), _convert_="all")
+def make_network(job: JobConfig) -> nn.Module:
+    """The model's Q-network from `job.model.network` (`_target_`), sized for `job.observation`."""
+    if not job.model.learned or job.model.network is None:
+        raise ValueError(f"model '{job.model.name}' is not a learned model: it has no network to train")
+    return hydra.utils.instantiate(job.model.network, **network_kwargs(job.observation), _convert_="all")
 
 
 def make_actor(net: nn.Module) -> QValueActor:
@@ -45,44 +45,40 @@ def make_actor(net: nn.Module) -> QValueActor:
     return QValueActor(module, spec=OneHot(N_ACTIONS), action_space="one-hot")
 
 
-def make_exploration(cfg: DictConfig, device: torch.device) -> EGreedyModule:
+def make_exploration(learner: LearnerSchema, device: torch.device) -> EGreedyModule:
     """Epsilon-greedy over the actor's action, annealed linearly over `eps_steps` env steps."""
-    learner = cfg.learner
-    return EGreedyModule(OneHot(N_ACTIONS, device=device), eps_init=float(learner.eps_start),
-                         eps_end=float(learner.eps_end), annealing_num_steps=int(learner.eps_steps),
-                         device=device)
+    return EGreedyModule(OneHot(N_ACTIONS, device=device), eps_init=learner.eps_start, eps_end=learner.eps_end,
+                         annealing_num_steps=learner.eps_steps, device=device)
 
 
 def make_policy(actor: QValueActor, exploration: EGreedyModule) -> TensorDictSequential:
     return TensorDictSequential(actor, exploration)
 
 
-def make_loss(cfg: DictConfig, actor: QValueActor) -> DQNLoss:
+def make_loss(learner: LearnerSchema, actor: QValueActor) -> DQNLoss:
     """DQN loss with a delayed (target) copy of the network; Double DQN from config."""
-    learner = cfg.learner
-    loss = DQNLoss(actor, loss_function=str(learner.get("loss_function", "l2")), delay_value=True,
-                   double_dqn=bool(learner.double_dqn), action_space="one-hot")
-    loss.make_value_estimator(gamma=float(learner.gamma))
+    loss = DQNLoss(actor, loss_function=learner.loss_function, delay_value=True, double_dqn=learner.double_dqn,
+                   action_space="one-hot")
+    loss.make_value_estimator(gamma=learner.gamma)
     return loss
 
 
-def make_replay_buffer(cfg: DictConfig, device: torch.device) -> TensorDictPrioritizedReplayBuffer:
+def make_replay_buffer(learner: LearnerSchema, device: torch.device) -> TensorDictPrioritizedReplayBuffer:
     """Proportional prioritized replay over flat transitions, stored on the training device."""
-    learner = cfg.learner
     return TensorDictPrioritizedReplayBuffer(
-        alpha=float(learner.per_alpha), beta=float(learner.per_beta_start),
-        storage=LazyTensorStorage(int(learner.buffer_size), device=device),
-        batch_size=int(learner.batch_size), priority_key=PRIORITY_KEY)
+        alpha=learner.per_alpha, beta=learner.per_beta_start,
+        storage=LazyTensorStorage(learner.buffer_size, device=device),
+        batch_size=learner.batch_size, priority_key=PRIORITY_KEY)
 
 
-def make_update(cfg: DictConfig, loss_module: DQNLoss, optimizer: torch.optim.Optimizer,
+def make_update(learner: LearnerSchema, loss_module: DQNLoss, optimizer: torch.optim.Optimizer,
                 device: torch.device) -> Callable[[TensorDictBase], TensorDict]:
     """One gradient step on a sampled batch -> TensorDict(loss, td_error, grad_norm).
 
     The TD error is returned rather than read back from the batch because a CUDA-graph
     captured update works on its own static copy of the input.
     """
-    max_grad_norm = float(cfg.learner.max_grad_norm)
+    max_grad_norm = learner.max_grad_norm
     params = list(loss_module.parameters())
 
     def update(batch: TensorDictBase) -> TensorDict:
@@ -94,9 +90,9 @@ def make_update(cfg: DictConfig, loss_module: DQNLoss, optimizer: torch.optim.Op
         return TensorDict(loss=loss.detach(), td_error=batch.get(PRIORITY_KEY).detach(),
                           grad_norm=grad_norm.detach())
 
-    if cfg.learner.get("compile", False):
+    if learner.compile:
         update = torch.compile(update)
-    if cfg.learner.get("cuda_graph", False):
+    if learner.cuda_graph:
         if device.type != "cuda":
             warnings.warn("learner.cuda_graph=true needs device=cuda; ignored on " + str(device), stacklevel=2)
         else:

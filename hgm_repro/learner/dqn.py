@@ -17,7 +17,6 @@ from typing import Any
 
 import numpy as np
 import torch
-from omegaconf import DictConfig
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
@@ -28,6 +27,7 @@ from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
 from ..experiment.checkpoint import BEST_CHECKPOINT, load_checkpoint, recorded_training_config, save_checkpoint
 from ..experiment.interrupts import raise_if_pending
+from ..experiment.schema import JobConfig
 from ..experiment.train_key import train_key
 from ..metrics import TRAINING_CURVE_METRICS
 from .builders import (
@@ -76,67 +76,66 @@ def _buffer_megabytes(buffer) -> float:
     return len(buffer) * one.bytes() / 2**20
 
 
-def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
-    """Train `cfg.model` on `cfg.train_scenario`; returns the final checkpoint's path.
+def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
+    """Train `job.model` on `job.train_scenario`; returns the final checkpoint's path.
 
     Resumes from `checkpoint_dir/last.pt` when it exists (and belongs to this config), and
     returns `final.pt` at once when the run already finished.
     """
-    L = cfg.learner
+    L = job.learner
     checkpoint_dir = Path(checkpoint_dir)
     last_path, final_path = checkpoint_dir / "last.pt", checkpoint_dir / "final.pt"
     best_path = checkpoint_dir / BEST_CHECKPOINT
-    device = torch.device(cfg.device)
-    config = recorded_training_config(cfg)
-    this_train_key = train_key(cfg)
+    device = torch.device(job.device)
+    config = recorded_training_config(job)
+    this_train_key = train_key(job)
 
     resume = None
     for path in (final_path, last_path):
         if path.exists():
             # On the CPU: RNG states must stay CPU tensors; load_state_dict moves weights to `device`.
-            resume = load_checkpoint(path, cfg, strict=True, map_location="cpu")  # refuses a foreign one
+            resume = load_checkpoint(path, job, strict=True, map_location="cpu")  # refuses a foreign one
             break
     if resume is not None and resume["finished"]:
         return final_path if final_path.exists() else save_checkpoint(resume, final_path)
 
-    if int(L.get("torch_threads", 0)) > 0:
-        torch.set_num_threads(int(L.torch_threads))
-    torch.manual_seed(int(cfg.seed))
-    np.random.seed(int(cfg.seed))
-    random.seed(int(cfg.seed))
+    if L.torch_threads > 0:
+        torch.set_num_threads(L.torch_threads)
+    torch.manual_seed(job.seed)
+    np.random.seed(job.seed)
+    random.seed(job.seed)
 
     # --- the parts: env, network, policy, loss, target updater, optimiser, replay ---------------
-    n_envs = int(L.n_envs)
+    n_envs = L.n_envs
     frames_per_batch = n_envs  # one decision in every env per batch
     # Round the total up to whole batches so that a fresh and a resumed run stop at the same step.
-    total_steps = math.ceil(int(L.total_steps) / frames_per_batch) * frames_per_batch
-    warmup_steps = math.ceil(int(L.warmup_steps) / frames_per_batch) * frames_per_batch
-    update_every = float(L.update_every)
+    total_steps = math.ceil(L.total_steps / frames_per_batch) * frames_per_batch
+    warmup_steps = math.ceil(L.warmup_steps / frames_per_batch) * frames_per_batch
+    update_every = L.update_every
 
     steps_done = int(resume["env_steps"]) if resume else 0
-    env = make_env(cfg, cfg.train_scenario, n_envs=n_envs, seed=int(cfg.seed))
-    net = make_network(cfg).to(device)
+    env = make_env(job, job.train_scenario, n_envs=n_envs, seed=job.seed)
+    net = make_network(job).to(device)
     actor = make_actor(net).to(device)
-    exploration = make_exploration(cfg, device)
+    exploration = make_exploration(L, device)
     policy = make_policy(actor, exploration)
-    loss_module = make_loss(cfg, actor).to(device)
-    updates_per_target = max(1, round(int(L.target_update_steps) / update_every))
+    loss_module = make_loss(L, actor).to(device)
+    updates_per_target = max(1, round(L.target_update_steps / update_every))
     # HardUpdate copies on the (interval + 1)-th call: interval = period - 1 gives exactly one
     # copy every target_update_steps env steps.
     target_updater = HardUpdate(loss_module, value_network_update_interval=updates_per_target - 1)
-    optimizer = torch.optim.Adam(loss_module.parameters(), lr=float(L.lr),
-                                 capturable=bool(L.get("cuda_graph", False)) and device.type == "cuda")
-    buffer = make_replay_buffer(cfg, device)
+    optimizer = torch.optim.Adam(loss_module.parameters(), lr=L.lr, capturable=L.cuda_graph and device.type == "cuda")
+    buffer = make_replay_buffer(L, device)
     n_batches = total_steps // frames_per_batch
-    beta_schedule = LinearScheduler(buffer, "beta", final_value=float(L.per_beta_end), num_steps=n_batches)
-    update = make_update(cfg, loss_module, optimizer, device)
-    n_step = NStepReturns(int(L.get("n_step", 1)), float(L.gamma))
-    reward_scale = float(L.get("reward_scale", 1.0))
+    beta_schedule = LinearScheduler(buffer, "beta", final_value=L.per_beta_end, num_steps=n_batches)
+    update = make_update(L, loss_module, optimizer, device)
+    n_step = NStepReturns(L.n_step, L.gamma)
+    reward_scale = L.reward_scale
 
     updates_done, update_credit = 0, 0.0
-    eval_every = int(L.get("eval_every", 0))
-    val_env = make_env(cfg, cfg.train_scenario, n_envs=int(L.get("val_envs", 8)),
-                       seed=int(cfg.seed) + VAL_SEED_OFFSET) if eval_every > 0 else None
+    eval_every = L.eval_every
+    val_env = make_env(job, job.train_scenario, n_envs=L.val_envs,
+                       seed=job.seed + VAL_SEED_OFFSET) if eval_every > 0 else None
     best_val = -math.inf
     if resume:
         best_val = float(resume.get("best_val_return", -math.inf))
@@ -158,16 +157,16 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
     # Updates start once the buffer holds the warm-up's worth of transitions. On a fresh run that
     # is exactly `warmup_steps` steps of random actions; on a resume without a stored buffer the
     # restored epsilon-greedy policy refills it first (those steps count as env steps).
-    learn_from = min(warmup_steps, int(L.buffer_size))
+    learn_from = min(warmup_steps, L.buffer_size)
     collector = Collector(
         env, policy, frames_per_batch=frames_per_batch, total_frames=total_steps - steps_done,
         init_random_frames=max(0, warmup_steps - steps_done), device=device, storing_device=device,
         auto_register_policy_transforms=False)  # the Q-network is feed-forward: no InitTracker needed
 
     def checkpoint_state(finished: bool) -> dict[str, Any]:
-        small = _buffer_megabytes(buffer) <= float(L.get("checkpoint_buffer_max_mb", 256))
+        small = _buffer_megabytes(buffer) <= L.checkpoint_buffer_max_mb
         return {
-            "format": 1, "model": cfg.model.name, "train_key": this_train_key, "training_config": config,
+            "format": 1, "model": job.model.name, "train_key": this_train_key, "training_config": config,
             "finished": finished, "env_steps": steps_done, "updates": updates_done, "update_credit": update_credit,
             "network": net.state_dict(), "loss": loss_module.state_dict(), "optimizer": optimizer.state_dict(),
             "exploration": exploration.state_dict(), "epsilon": float(exploration.eps),
@@ -182,7 +181,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
         drawn from validation seeds; keeps `best.pt` when the mean return is the best so far."""
         nonlocal best_val
         net.eval()
-        episodes = run_episodes(val_env, actor, int(L.get("val_episodes", 1)), int(cfg.seed) + VAL_SEED_OFFSET)
+        episodes = run_episodes(val_env, actor, L.val_episodes, job.seed + VAL_SEED_OFFSET)
         net.train()
         metrics = episode_means(episodes, "val")
         if metrics["val/episode_return"] > best_val:
@@ -193,7 +192,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
         metrics["val/best_episode_return"] = best_val
         return metrics
 
-    progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {cfg.model.name}",
+    progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {job.model.name}",
                     disable=not sys.stdout.isatty(), dynamic_ncols=True)
     episodes: dict[str, list[float]] = {k: [] for k in TRAINING_CURVE_METRICS}
     losses: list[torch.Tensor] = []
@@ -244,7 +243,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
                     collector.shutdown()
                     raise NonFiniteLossError(
                         f"training loss became {batch_loss.tolist()} at env step {steps_done} (update {updates_done}) "
-                        f"for model '{cfg.model.name}'; stopped. The last good checkpoint is {last_path} "
+                        f"for model '{job.model.name}'; stopped. The last good checkpoint is {last_path} "
                         f"(if one was written). Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
                 losses.append(batch_loss.mean())
             collector.update_policy_weights_()
@@ -253,7 +252,7 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
         if progress.n % (50 * frames_per_batch) < frames_per_batch:
             progress.set_postfix(eps=f"{float(exploration.eps):.3f}", speed_kmh=f"{recent_speed:.1f}", refresh=False)
 
-        if steps_done // int(L.log_every) > steps_before // int(L.log_every) or steps_done >= total_steps:
+        if steps_done // L.log_every > steps_before // L.log_every or steps_done >= total_steps:
             now = time.perf_counter()
             metrics = {f"train/{k}": float(np.mean(v)) for k, v in episodes.items() if v}
             if losses:
@@ -268,13 +267,13 @@ def train(cfg: DictConfig, checkpoint_dir: Path, log: Log) -> Path:
             log(metrics, steps_done)
             if progress.disable:  # no bar when output goes to a file: a line per log interval instead
                 logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h",
-                            cfg.model.name, steps_done, total_steps, metrics["train/steps_per_s"],
+                            job.model.name, steps_done, total_steps, metrics["train/steps_per_s"],
                             metrics["train/epsilon"], metrics.get("train/avg_speed_kmh", float("nan")))
             episodes = {k: [] for k in TRAINING_CURVE_METRICS}
             losses = []
             last_log_steps, last_log_time = steps_done, now
 
-        if steps_done // int(L.checkpoint_every) > steps_before // int(L.checkpoint_every) and steps_done < total_steps:
+        if steps_done // L.checkpoint_every > steps_before // L.checkpoint_every and steps_done < total_steps:
             save_checkpoint(checkpoint_state(finished=False), last_path)
 
     progress.close()
