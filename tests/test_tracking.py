@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
+import subprocess
+import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -16,7 +19,16 @@ from hgm_repro import CONF_DIR
 from hgm_repro.experiment.interrupts import JobInterrupted
 from hgm_repro.experiment.job import RUN_ID_FILE, run_job
 from hgm_repro.experiment.schema import JobConfig, validate
-from hgm_repro.experiment.tracking import Tracker, flatten, git_info, resolve_location, retry, tidy_number
+from hgm_repro.experiment.tracking import (
+    STORE_FORMAT_TAG,
+    StoreError,
+    Tracker,
+    flatten,
+    git_info,
+    resolve_location,
+    retry,
+    tidy_number,
+)
 from hgm_repro.experiment.train_key import train_key
 from hgm_repro.simulator.config import ConfigError, ScenarioConfig
 
@@ -180,13 +192,33 @@ def test_interrupted_training_resumes_the_same_run(launch: Path) -> None:
     assert sorted(m.step for m in history) == [64, 128, 192, 256]
 
 
+def _run_in_a_process(launch: Path, key: str) -> tuple[subprocess.Popen, str]:
+    """Another process opens a training run of `key` and keeps working on it (sleeps)."""
+    code = (
+        "import sys, time\n"
+        "from pathlib import Path\n"
+        "from hgm_repro.experiment.tracking import Tracker, resolve_location\n"
+        "tracker = Tracker(resolve_location({}, Path(sys.argv[1])), 'hgm_repro')\n"
+        "print(tracker.start_run('train-other', {'stage': 'train', 'train_key': sys.argv[2]}), flush=True)\n"
+        "time.sleep(600)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(CONF_DIR.parent), os.environ.get("PYTHONPATH", "")])}
+    other = subprocess.Popen([sys.executable, "-c", code, str(launch), key], stdout=subprocess.PIPE, text=True,
+                             env=env)
+    return other, other.stdout.readline().strip()
+
+
 def test_a_killed_process_run_is_closed_and_resumed(launch: Path) -> None:
-    """SIGKILL leaves the run RUNNING with a dead pid; the next job marks it KILLED, then resumes it."""
+    """A run stays RUNNING while its process lives; SIGKILLed, the next job marks it KILLED and resumes it."""
     cfg = make_cfg()
-    tracker = store(launch)
     key = train_key(cfg)
-    run_id = tracker.start_run("train-dead", {"stage": "train", "train_key": key, "model": "proposed"})
-    tracker.set_tags(run_id, {"pid": "999999999"})  # no such process
+    other, run_id = _run_in_a_process(launch, key)
+    try:
+        assert store(launch).close_orphans() == []  # alive: another job must not close it
+        assert store(launch).get_run(run_id).info.status == "RUNNING"
+    finally:
+        other.send_signal(signal.SIGKILL)
+        other.wait()
     (launch / "checkpoints" / key).mkdir(parents=True)
     (launch / "checkpoints" / key / RUN_ID_FILE).write_text(run_id)
     (launch / "checkpoints" / key / "last.pt").write_text("128")
@@ -194,6 +226,74 @@ def test_a_killed_process_run_is_closed_and_resumed(launch: Path) -> None:
     outcome = run_job(cfg, launch, train_fn=learner, evaluate_fn=fake_evaluate)
     assert outcome.training.how == "resumed" and outcome.training.run_id == run_id
     assert [r.info.status for r in runs(launch, "train")] == ["FINISHED"]
+
+
+def test_orphans_of_every_stage_are_closed(launch: Path) -> None:
+    """Runs of any stage left by a dead pid on this host (no lock file: an older job) are closed."""
+    tracker = store(launch)
+    ids = [tracker.start_run(f"dead-{stage}", {"stage": stage, "train_key": "other"}) for stage in ("train", "eval")]
+    for run_id in ids:
+        tracker.set_tags(run_id, {"pid": "999999999"})  # no such process
+        lock = tracker._held.pop(run_id)  # as if written before run locks existed
+        Path(lock.lock_file).unlink()
+        lock.release()
+    run_job(make_cfg("model=human"), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    assert {store(launch).get_run(run_id).info.status for run_id in ids} == {"KILLED"}
+
+
+class LogsPastItsCheckpoint(FakeLearner):
+    """Logs step 192 but dies before its checkpoint records it (SIGKILL between the two writes)."""
+
+    def __call__(self, cfg: DictConfig, checkpoint_dir: Path, log) -> Path:
+        if self.interrupt_after is None:
+            return super().__call__(cfg, checkpoint_dir, log)
+        self.calls.append(checkpoint_dir)
+        for step in (64, 128):
+            log({"train/loss": 1.0 / step}, step)
+            (checkpoint_dir / "last.pt").write_text(str(step))
+        log({"train/loss": 1.0}, 192)
+        self.interrupt_after = None
+        raise JobInterrupted()
+
+
+def test_a_resumed_run_logs_each_step_once(launch: Path) -> None:
+    learner = LogsPastItsCheckpoint(interrupt_after=192)
+    with pytest.raises(SystemExit):
+        run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    (train,) = runs(launch, "train")
+    history = store(launch).client.get_metric_history(train.info.run_id, "train/loss")
+    assert sorted(m.step for m in history) == [64, 128, 192, 256]
+
+
+def test_a_finished_evaluation_is_not_repeated(launch: Path) -> None:
+    first = run_job(make_cfg(), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    again = run_job(make_cfg(), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    assert again.eval_run_id == first.eval_run_id and again.means == first.means
+    assert len(runs(launch, "eval")) == 1
+    other = run_job(make_cfg("learner.test_steps=32"), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    assert other.eval_run_id != first.eval_run_id and len(runs(launch, "eval")) == 2
+
+
+def test_a_store_from_another_version_is_named(launch: Path) -> None:
+    tracker = store(launch)
+    tracker.client.set_experiment_tag(tracker.experiment_id, STORE_FORMAT_TAG, "0")
+    with pytest.raises(StoreError, match="another version of hgm_repro"):
+        store(launch)
+
+
+def test_a_checkpoint_from_another_version_or_half_written_is_refused(tmp_path: Path) -> None:
+    import torch
+
+    from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint, save_checkpoint
+
+    path = save_checkpoint({"format": 99}, tmp_path / "last.pt")
+    with pytest.raises(CheckpointMismatchError, match="another version of hgm_repro"):
+        load_checkpoint(path)
+    torch.save({"format": 1, "weights": torch.zeros(1000)}, path)
+    path.write_bytes(path.read_bytes()[:500])  # cut short, as by a crash of a non-atomic writer
+    with pytest.raises(CheckpointMismatchError, match="cannot be read"):
+        load_checkpoint(path)
 
 
 def test_non_learning_driver_only_evaluates(launch: Path) -> None:

@@ -93,7 +93,7 @@ def run_episodes(env, policy: Policy, episodes: int, traffic: int) -> pd.DataFra
         sim.generator.manual_seed(_traffic_seed(traffic, 0, 0))
         td = env.reset()
         while bool((finished < episodes).any()):
-            raise_if_pending()  # a SIGTERM stops the evaluation between steps
+            raise_if_pending()  # a stop signal ends the evaluation between steps
             td = policy(td)
             sim.generator.manual_seed(_traffic_seed(traffic, 1, decision))
             td = step_mdp(env.step(td), keep_other=True, exclude_action=True)

@@ -67,11 +67,20 @@ def check_compatible(checkpoint: dict[str, Any], job: JobConfig, path: Path, str
 
 
 def save_checkpoint(state: dict[str, Any], path: Path) -> Path:
-    """Write `state` to `path` atomically: a run killed mid-write leaves the previous file intact."""
+    """Write `state` to `path` atomically: a run killed mid-write leaves the previous file intact.
+
+    Only the job holding the train_key's lock writes here, so another temporary file of the same
+    name is what a killed writer left half-written: it is removed.
+    """
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
+    for stale in path.parent.glob(f".{path.name}.tmp-*"):
+        stale.unlink(missing_ok=True)
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    torch.save(state, tmp)
+    with open(tmp, "wb") as file:
+        torch.save(state, file)
+        file.flush()
+        os.fsync(file.fileno())  # on disk before the rename makes it the checkpoint
     os.replace(tmp, path)
     return path
 
@@ -82,9 +91,17 @@ def load_checkpoint(path: Path, job: JobConfig | None = None, strict: bool = Tru
     path = Path(path)
     # weights_only=False: the checkpoint also holds RNG states, schedules and (maybe) the replay
     # buffer, which are not plain tensors. Only load checkpoints this project wrote.
-    checkpoint = torch.load(path, map_location=map_location, weights_only=False)
-    if checkpoint.get("format") != CHECKPOINT_FORMAT:
-        raise CheckpointMismatchError(f"{path} is not a hgm_repro checkpoint of format {CHECKPOINT_FORMAT}")
+    try:
+        checkpoint = torch.load(path, map_location=map_location, weights_only=False)
+    except Exception as error:  # truncated, not a torch file, or pickled classes that no longer exist
+        raise CheckpointMismatchError(
+            f"checkpoint {path} cannot be read ({type(error).__name__}: {str(error)[:200]}): it is not a complete "
+            f"checkpoint of this version of hgm_repro. Delete it to start that training over.") from error
+    found = checkpoint.get("format") if isinstance(checkpoint, dict) else None
+    if found != CHECKPOINT_FORMAT:
+        raise CheckpointMismatchError(
+            f"checkpoint {path} was written by another version of hgm_repro (checkpoint format {found}; this "
+            f"version reads format {CHECKPOINT_FORMAT}). Use the version that wrote it, or delete it to train again.")
     if job is not None:
         check_compatible(checkpoint, job, path, strict=strict)
     return checkpoint

@@ -1,25 +1,34 @@
-"""SIGTERM as an exception, raised only at safe points.
+"""Stop signals as an exception, raised only at safe points.
 
-Schedulers (SLURM, Kubernetes, a user's `kill`) stop a job with SIGTERM. Turned into
-`JobInterrupted` the job can close its MLflow runs as KILLED and leave its checkpoint
-directory ready for a resume. The handler only records the signal: raising from inside
-arbitrary library code (a tensordict context manager, a store write) can leave that code in
-a broken state or turn the interrupt into another error. Loops call `raise_if_pending()`
-once per iteration (training batches, evaluation steps, waiting for a lock), and a
-`protected()` block raises a pending signal when it ends.
+Schedulers and users stop a job with a signal: SIGTERM (`kill`, `scancel`, Kubernetes), SIGINT
+(Ctrl-C) or SIGUSR2 (SLURM's `--signal=USR2@...` before a time limit, which submitit answers by
+requeueing the job). Turned into `JobInterrupted` the job can write `last.pt`, close its MLflow
+runs as KILLED and leave its checkpoint directory ready for a resume. The handler only records
+the signal: raising from inside arbitrary library code (a tensordict context manager, a store
+write) can leave that code in a broken state or turn the interrupt into another error. Loops
+call `raise_if_pending()` once per iteration (training batches, evaluation steps, waiting for a
+lock), a `protected()` block raises a pending signal when it ends, and a `deferred()` block
+leaves it to the next safe point (the learner's, which writes `last.pt` first).
+
+Once the job has cleaned up, `hand_on` gives the signal to whoever handled it before the job
+started: under submitit that is its requeue handler (SIGUSR2: checkpoint the callable, requeue,
+exit), so the requeued job resumes from `last.pt`; otherwise the process exits with 128 + signal.
 """
 
 from __future__ import annotations
 
 import signal
 import threading
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from types import FrameType
+from typing import Any, NoReturn
+
+STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR2)
 
 
 class JobInterrupted(KeyboardInterrupt):
-    """Raised in the main thread on SIGTERM. A KeyboardInterrupt, so `except Exception` passes it on."""
+    """Raised in the main thread on a stop signal. A KeyboardInterrupt, so `except Exception` passes it on."""
 
     def __init__(self, signum: int = signal.SIGTERM) -> None:
         super().__init__(f"interrupted by {signal.Signals(signum).name}")
@@ -28,6 +37,7 @@ class JobInterrupted(KeyboardInterrupt):
 
 _depth = 0
 _pending: int | None = None
+_previous: dict[int, Any] = {}  # the handlers the job replaced, for `hand_on`
 
 
 def _on_signal(signum: int, frame: FrameType | None) -> None:
@@ -35,8 +45,13 @@ def _on_signal(signum: int, frame: FrameType | None) -> None:
     _pending = signum  # raised at the next safe point
 
 
+def pending() -> bool:
+    """A stop signal arrived and will be raised at the next safe point."""
+    return _pending is not None and _depth == 0
+
+
 def raise_if_pending() -> None:
-    """Raise `JobInterrupted` if SIGTERM arrived since the last safe point (outside `protected()`)."""
+    """Raise `JobInterrupted` if a stop signal arrived since the last safe point (outside `protected()`)."""
     global _pending
     if _pending is not None and _depth == 0:
         signum, _pending = _pending, None
@@ -44,27 +59,45 @@ def raise_if_pending() -> None:
 
 
 @contextmanager
-def protected() -> Iterator[None]:
-    """Let the write inside finish before a pending SIGTERM is raised."""
-    global _depth, _pending
+def deferred() -> Iterator[None]:
+    """A stop signal arriving inside waits for the next safe point after the block (none raises within)."""
+    global _depth
     _depth += 1
     try:
         yield
     finally:
         _depth -= 1
+
+
+@contextmanager
+def protected() -> Iterator[None]:
+    """Let the write inside finish before a pending stop signal is raised."""
+    with deferred():
+        yield
     raise_if_pending()
 
 
 @contextmanager
-def sigterm_raises() -> Iterator[None]:
-    """Within this block SIGTERM raises `JobInterrupted` (main thread only; elsewhere a no-op)."""
+def signals_raise() -> Iterator[None]:
+    """Within this block the stop signals raise `JobInterrupted` (main thread only; elsewhere a no-op)."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
     global _pending
-    previous = signal.signal(signal.SIGTERM, _on_signal)
+    _previous.clear()
+    for signum in STOP_SIGNALS:
+        _previous[signum] = signal.signal(signum, _on_signal)
     try:
         yield
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for signum, handler in _previous.items():
+            signal.signal(signum, handler)
         _pending = None  # a signal after the last safe point came when the work was already done
+
+
+def hand_on(interrupted: JobInterrupted) -> NoReturn:
+    """After the job stopped cleanly: run the handler the job displaced (submitit's requeue), then exit."""
+    handler: Callable[[int, FrameType | None], Any] | Any = _previous.get(interrupted.signum)
+    if callable(handler) and handler is not signal.default_int_handler:
+        handler(interrupted.signum, None)  # submitit: dumps the requeued call, requeues, sys.exit
+    raise SystemExit(128 + interrupted.signum)

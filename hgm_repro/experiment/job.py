@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import os
+import sys
 import tempfile
 import time
 from collections.abc import Callable, Iterator
@@ -25,11 +26,12 @@ from omegaconf import DictConfig, OmegaConf
 
 from ..metrics import VALIDATION_RETURN
 from ..simulator.config import ConfigError, ScenarioConfig
-from .checkpoint import BEST_CHECKPOINT, FINAL_CHECKPOINT
-from .interrupts import JobInterrupted, raise_if_pending, sigterm_raises
+from .checkpoint import BEST_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchError
+from .interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
 from .schema import JobConfig, validate
 from .tracking import (
     PARENT_RUN_ENV,
+    StoreError,
     Tracker,
     flatten,
     git_info,
@@ -38,7 +40,7 @@ from .tracking import (
     resolve_location,
     scenario_label,
 )
-from .train_key import train_key, training_config
+from .train_key import evaluation_key, train_key, training_config
 
 log = logging.getLogger(__name__)
 
@@ -46,6 +48,7 @@ TrainFn = Callable[[JobConfig, Path, Callable[[dict[str, float], int], None]], P
 EvaluateFn = Callable[[JobConfig, ScenarioConfig, "Path | None"], Any]
 RUN_ID_FILE = "mlflow_run_id"  # beside the checkpoints: the training run a resume continues
 CHECKPOINT_ARTIFACT = "checkpoint"
+BAD_INPUT_EXIT = 2  # a config, store or checkpoint this job cannot use (as for a bad command line)
 
 
 @dataclass
@@ -76,7 +79,11 @@ def hydra_job(cfg: DictConfig) -> float | None:
     # A sweep's parent run is opened by the SweepTracking callback; a single job opens its own.
     parent = os.environ.get(PARENT_RUN_ENV) if multirun else None
     single = None if multirun else " ".join(hydra_cfg.overrides.task)
-    outcome = run_job(cfg, Path(get_original_cwd()), parent_run_id=parent, launch_overrides=single)
+    try:
+        outcome = run_job(cfg, Path(get_original_cwd()), parent_run_id=parent, launch_overrides=single)
+    except (ConfigError, StoreError, CheckpointMismatchError) as error:
+        print(f"hgm_repro: {error}", file=sys.stderr)
+        raise SystemExit(BAD_INPUT_EXIT) from error
     # What a Hydra sweeper optimises: the validation return, never a test scenario's.
     if multirun and outcome.validation_return is None and outcome.training.how != "none":
         log.warning("no %s in training run %s (validation off: learner.eval_every=0): a sweeper gets "
@@ -99,35 +106,35 @@ def run_job(
     label = f"model={job.model.name} scenario={job.scenario.name} seed={job.seed} train_key={key}"
     log.info("job start: %s (experiment=%s, device=%s)", label, job.experiment.name, job.device)
     started = time.monotonic()
-    tracker = Tracker(resolve_location(asdict(job.tracking), launch_dir), job.tracking.experiment_name)
-    for run_id in tracker.mark_orphans_killed(key):
-        log.info("run %s was left RUNNING by a process that no longer exists: marked KILLED", run_id)
-    serve = tracker.ui_command()
-    log.info("MLflow runs: %s%s", tracker.ui_url(), f" (serve the store first: {serve})" if serve else "")
     commit, dirty = git_info()
     tags = {"model": job.model.name, "seed": job.seed, "train_key": key, "git_commit": commit,
             "git_dirty": dirty, "experiment": job.experiment.name, "device": job.device}
     launch_run = description = None
-    if launch_overrides is not None and parent_run_id is None:
-        description = launch_description("job", launch_overrides, Path(launch_dir).resolve())
-        launch_run = parent_run_id = tracker.start_run(
-            f"job {job.model.name} seed{job.seed} {scenario_label(job.scenario.name)}",
-            # train_key: a SIGKILLed job's launch run is closed with its training (mark_orphans_killed).
-            {**launch_tags("job", launch_overrides), "train_key": key}, description=description)
     validation_return = None
     try:
-        with sigterm_raises(), (_run_status(tracker, launch_run) if launch_run else nullcontext()):
-            if job.model.learned:
-                training = obtain_checkpoint(job, key, tracker, tags, parent_run_id, train_fn)
-                validation_return = tracker.best_value(training.run_id, VALIDATION_RETURN)
-            else:
-                training = Training("none")
-            eval_run_id, means = evaluate_and_log(job, tracker, tags, parent_run_id, training, evaluate_fn)
-            if launch_run:
-                tracker.summarise_launch(launch_run, description)
+        with signals_raise():
+            tracker = Tracker(resolve_location(asdict(job.tracking), launch_dir), job.tracking.experiment_name)
+            for run_id in tracker.close_orphans():
+                log.info("run %s was left RUNNING by a process that no longer exists: marked KILLED", run_id)
+            serve = tracker.ui_command()
+            log.info("MLflow runs: %s%s", tracker.ui_url(), f" (serve the store first: {serve})" if serve else "")
+            if launch_overrides is not None and parent_run_id is None:
+                description = launch_description("job", launch_overrides, Path(launch_dir).resolve())
+                launch_run = parent_run_id = tracker.start_run(
+                    f"job {job.model.name} seed{job.seed} {scenario_label(job.scenario.name)}",
+                    {**launch_tags("job", launch_overrides), "train_key": key}, description=description)
+            with _run_status(tracker, launch_run) if launch_run else nullcontext():
+                if job.model.learned:
+                    training = obtain_checkpoint(job, key, tracker, tags, parent_run_id, train_fn)
+                    validation_return = tracker.best_value(training.run_id, VALIDATION_RETURN)
+                else:
+                    training = Training("none")
+                eval_run_id, means = evaluate_and_log(job, tracker, tags, parent_run_id, training, evaluate_fn)
+                if launch_run:
+                    tracker.summarise_launch(launch_run, description)
     except JobInterrupted as interrupted:
         log.error("job interrupted (%s): %s; the same command resumes it", interrupted, label)
-        raise SystemExit(128 + interrupted.signum) from interrupted
+        hand_on(interrupted)
     seconds = time.monotonic() - started
     summary = " ".join(f"{k}={v:.3g}" for k, v in means.items() if k in ("eval/avg_speed_kmh", "eval/episode_return"))
     log.info("job end: %s training=%s %s (%.1f s)", label, training.how, summary, seconds)
@@ -149,7 +156,7 @@ def obtain_checkpoint(
         lock.acquire(timeout=0)
     except Timeout:
         log.info("train_key=%s is being trained by another job: waiting for it", key)
-        while True:  # in slices, so that a SIGTERM while waiting still stops the job
+        while True:  # in slices, so that a stop signal while waiting still stops the job
             try:
                 lock.acquire(timeout=1.0)
                 break
@@ -210,6 +217,12 @@ def local_checkpoint(tracker: Tracker, run: Any, checkpoint_dir: Path) -> Path |
     return final if final.is_file() else None
 
 
+def _write_atomically(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    tmp.write_text(text)
+    os.replace(tmp, path)
+
+
 def _clear_checkpoints(checkpoint_dir: Path) -> None:
     # The finished run keeps its checkpoint as an artifact; a forced retrain must not resume it.
     for path in checkpoint_dir.glob("*.pt"):
@@ -223,27 +236,34 @@ def _train(
 ) -> Training:
     if train_fn is None:
         from ..learner import train as train_fn
+    from ..learner.builders import make_network
+    from ..networks import param_counts
+
     job_tags = {**tags, "stage": "train", "scenario": job.train_scenario.name}
+    logged: dict[str, int] = {}
     if unfinished is not None:
         run_id, how = unfinished, "resumed"
         tracker.reopen(run_id)
         resumes = int(tracker.get_run(run_id).data.tags.get("resumes", "0")) + 1
         tracker.set_tags(run_id, {"resumes": resumes, "device": tags["device"]})
+        # The killed attempt may have logged steps beyond its last checkpoint: keep those and log
+        # only later steps, so that each step appears once (no store API deletes metric values).
+        logged = tracker.logged_steps(run_id)
         log.info("resuming training run %s from %s", run_id, checkpoint_dir / "last.pt")
     else:
-        from ..learner.builders import make_network
-        from ..networks import param_counts
-
         how = "trained"
         run_id = tracker.start_run(f"{job.model.name} seed{job.seed} training {key}", job_tags, parent_run_id,
                                    description=_training_description(job, key, checkpoint_dir))
-        (checkpoint_dir / RUN_ID_FILE).write_text(run_id)
-        tracker.log_params(run_id, {**flatten(training_config(job)),
-                                    **{k: str(v) for k, v in param_counts(make_network(job)).items()}})
-        tracker.log_text(run_id, _config_yaml(job), "config.yaml")
+        _write_atomically(checkpoint_dir / RUN_ID_FILE, run_id)
+    # Again on a resume: the killed attempt may have stopped before logging them (same values, allowed).
+    tracker.log_params(run_id, {**flatten(training_config(job)),
+                                **{k: str(v) for k, v in param_counts(make_network(job)).items()}})
+    tracker.log_text(run_id, _config_yaml(job), "config.yaml")
 
     def log_to_run(metrics: dict[str, float], step: int) -> None:
-        tracker.log_metrics(run_id, metrics, step)
+        new = {k: v for k, v in metrics.items() if step > logged.get(k, -1)}
+        if new:
+            tracker.log_metrics(run_id, new, step)
 
     with _run_status(tracker, run_id):
         with tracker.system_metrics(run_id, job.tracking.system_metrics):
@@ -310,7 +330,13 @@ def evaluate_and_log(
     if evaluate_fn is None:
         from ..evaluation import evaluate as evaluate_fn
     checkpoint = checkpoint_to_evaluate(job, training)  # before the run: a missing best.pt is a config error
-    eval_tags = {**tags, "stage": "eval", "scenario": job.scenario.name, "training": training.how}
+    key = evaluation_key(job)
+    done = tracker.finished_evaluation(key, training.run_id)
+    if done is not None:
+        log.info("evaluation %s already finished in run %s: not repeated", key, done.info.run_id)
+        return done.info.run_id, {k: v for k, v in done.data.metrics.items() if k.startswith("eval/")}
+    eval_tags = {**tags, "stage": "eval", "scenario": job.scenario.name, "training": training.how,
+                 "evaluation_key": key}
     if training.run_id:
         eval_tags["train_run_id"] = training.run_id
     if checkpoint is not None:

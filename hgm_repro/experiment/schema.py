@@ -47,6 +47,10 @@ def unit() -> dict[str, Check]:
 
 DEVICE_PATTERN = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
 
+# Where MLflow can keep runs (its tracking store registry); `postgresql+psycopg2://` counts as postgresql.
+TRACKING_SCHEMES = ("sqlite", "file", "http", "https", "postgresql", "mysql", "mssql", "databricks")
+TRACKING_EXAMPLES = "sqlite:///path/mlflow.db, file:///path/mlruns, http(s)://host:5000, postgresql://user@host/db"
+
 
 @dataclass(frozen=True)
 class LearnerSchema:
@@ -243,6 +247,16 @@ def _check_tracking(tracking: Any, errors: list[str]) -> None:
                           "(pip install 'hgm_repro[system-metrics]')")
 
 
+def _check_tracking_uri(tracking: Any, errors: list[str]) -> None:
+    uri = tracking.uri if isinstance(tracking, TrackingSchema) else None
+    if not uri:
+        return  # the default SQLite store in the launch dir
+    scheme = uri.split("://", 1)[0].split("+", 1)[0].lower() if "://" in uri else ""
+    if scheme not in TRACKING_SCHEMES:
+        errors.append(f"tracking.uri={uri!r} is not allowed: MLflow stores runs only under the schemes "
+                      f"{', '.join(TRACKING_SCHEMES)} (e.g. {TRACKING_EXAMPLES})")
+
+
 def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     """Check the whole job config; raise `ConfigError` listing every bad value."""
     root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
@@ -255,6 +269,7 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
         "eval": check_node(EvalSchema, root.get("eval", {}), "eval", errors),
     }
     _check_model(parts["model"], errors)
+    _check_tracking_uri(parts["tracking"], errors)
     seed = root.get("seed")
     if not _matches(int, seed) or seed < 0:
         errors.append(f"seed={seed!r} is not allowed: expected an integer >= 0")
@@ -293,6 +308,8 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
                 continue
             scenario, train_scenario = (built, train_scenario) if name == "scenario" else (scenario, built)
 
+    if len(errors) == 1:
+        raise ConfigError(f"invalid config: {errors[0]}")
     if errors:
         raise ConfigError("invalid config:\n  " + "\n  ".join(errors))
     return JobConfig(

@@ -4,6 +4,11 @@ Every call goes through `MlflowClient` (no fluent, process-global active run), b
 process may hold a sweep's parent run, a training run and an evaluation run at once.
 The default store is a SQLite file that parallel jobs share, so store creation happens under
 a file lock and every write is retried while SQLite answers "database is locked".
+
+A run is RUNNING in the store while a process works on it, and that process holds the run's
+lock file (`<launch dir>/.mlflow_run_locks/<run id>.lock`) until it closes the run. A job that
+opens the store closes every RUNNING run whose lock nobody holds (its process was SIGKILLed,
+or its machine lost power) as KILLED; the operating system drops a dead process's locks.
 """
 
 from __future__ import annotations
@@ -24,13 +29,13 @@ from functools import lru_cache
 from pathlib import Path
 from typing import Any, TypeVar
 
-from filelock import FileLock
+from filelock import FileLock, Timeout
 from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf
 
 from .. import PACKAGE_ROOT
 from .config_tree import flatten as flatten_tree
-from .interrupts import protected
+from .interrupts import protected, raise_if_pending
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -55,6 +60,14 @@ EXPERIMENT_DESCRIPTION = (
     "metrics `grid/<model>/scenario<s>/<metric>` are the means over its evaluations.\n\n"
     "Figures, tables and the PDF report: `python -m analysis`."
 )
+# What this version of hgm_repro writes into an experiment (tags and names); another value on
+# an existing experiment means another version made it.
+STORE_FORMAT = "1"
+STORE_FORMAT_TAG = "hgm_repro.store_format"
+
+
+class StoreError(RuntimeError):
+    """The tracking store cannot be used by this version (another MLflow schema or hgm_repro format)."""
 
 
 @dataclass(frozen=True)
@@ -65,6 +78,11 @@ class StoreLocation:
     artifact_location: str | None  # None: the server decides (remote stores)
     checkpoint_root: Path
     lock_path: Path  # serialises store and experiment creation between processes
+
+    @property
+    def run_locks(self) -> Path:
+        """Where the processes that run the store's RUNNING runs hold their lock files."""
+        return self.lock_path.parent / ".mlflow_run_locks"
 
     @property
     def is_local(self) -> bool:
@@ -171,10 +189,23 @@ class Tracker:
         # Creating a SQLite store runs its schema migrations: two processes doing that at
         # once corrupt it, so the first touch of the store and the experiment is locked.
         location.lock_path.parent.mkdir(parents=True, exist_ok=True)
+        self._held: dict[str, FileLock] = {}  # run id -> the lock that says this process runs it
         with FileLock(str(location.lock_path)):
-            self.client = MlflowClient(tracking_uri=location.tracking_uri)
-            self.experiment_id = retry(self._get_or_create_experiment, experiment_name)
-            retry(self._describe_experiment)
+            try:
+                self.client = MlflowClient(tracking_uri=location.tracking_uri)
+                experiment = retry(self._get_or_create_experiment, experiment_name)
+            except Exception as error:
+                raise StoreError(_store_problem(location.tracking_uri, error)) from error
+        found = experiment.tags.get(STORE_FORMAT_TAG)
+        if found is not None and found != STORE_FORMAT:
+            raise StoreError(
+                f"experiment '{experiment_name}' in the MLflow store {location.tracking_uri} was written by another "
+                f"version of hgm_repro (store format {found}; this version writes format {STORE_FORMAT}). "
+                f"Use another tracking.experiment_name or tracking.uri, or the hgm_repro version that wrote it.")
+        if found is None:
+            retry(self.client.set_experiment_tag, experiment.experiment_id, STORE_FORMAT_TAG, STORE_FORMAT)
+        self.experiment_id = experiment.experiment_id
+        retry(self._describe_experiment)
 
     def _describe_experiment(self) -> None:
         """The experiment's description, and its kind, so that the UI opens on runs (not GenAI traces)."""
@@ -202,20 +233,24 @@ class Tracker:
         """A markdown link to a run that works inside the UI (descriptions are rendered there)."""
         return f"[{text}](#/experiments/{self.experiment_id}/runs/{run_id})"
 
-    def _get_or_create_experiment(self, name: str) -> str:
+    def __getstate__(self) -> dict[str, Any]:
+        # submitit pickles Hydra's callbacks with each job: run locks belong to this process only.
+        return {**self.__dict__, "_held": {}}
+
+    def _get_or_create_experiment(self, name: str) -> Any:
         found = self.client.get_experiment_by_name(name)
         if found is not None:
             if found.lifecycle_stage == "deleted":
                 self.client.restore_experiment(found.experiment_id)
-            return found.experiment_id
+            return found
         try:
-            return self.client.create_experiment(name, artifact_location=self.location.artifact_location)
+            self.client.create_experiment(name, artifact_location=self.location.artifact_location,
+                                          tags={STORE_FORMAT_TAG: STORE_FORMAT})
         except Exception:
             # Another machine of the sweep created it first (our file lock is per machine).
-            found = self.client.get_experiment_by_name(name)
-            if found is None:
+            if self.client.get_experiment_by_name(name) is None:
                 raise
-            return found.experiment_id
+        return self.client.get_experiment_by_name(name)
 
     def _write(self, call: Callable[..., T], *args: Any, **kwargs: Any) -> T:
         with protected():
@@ -230,15 +265,42 @@ class Tracker:
         if parent_run_id:
             tags["mlflow.parentRunId"] = parent_run_id
         run = self._write(self.client.create_run, self.experiment_id, tags=tags, run_name=name)
+        # Until the lock is held, the pid tag says the run is alive (see `close_orphans`).
+        self._hold(run.info.run_id)
         return run.info.run_id
 
     def reopen(self, run_id: str) -> None:
-        """Mark an earlier, unfinished run RUNNING again under this process (resume)."""
+        """Mark an earlier, unfinished run RUNNING again under this process (resume).
+
+        The run's lock is taken first: a job closing orphans at the same moment either closes
+        the old attempt before this one reopens it, or finds the lock held and leaves it alone.
+        """
+        self._hold(run_id)
         self._write(self.client.update_run, run_id, status="RUNNING")
         self.set_tags(run_id, {"host": socket.gethostname(), "pid": str(os.getpid())})
 
     def end(self, run_id: str, status: str = "FINISHED") -> None:
         self._write(self.client.set_terminated, run_id, status=status)
+        lock = self._held.pop(run_id, None)
+        if lock is not None:
+            Path(lock.lock_file).unlink(missing_ok=True)  # filelock copes with an unlinked lock file
+            lock.release()
+
+    def _run_lock(self, run_id: str) -> FileLock:
+        self.location.run_locks.mkdir(parents=True, exist_ok=True)
+        return FileLock(str(self.location.run_locks / f"{run_id}.lock"))
+
+    def _hold(self, run_id: str) -> None:
+        if run_id in self._held:
+            return
+        lock = self._run_lock(run_id)
+        while True:  # in slices, so that a stop signal while waiting still stops the job
+            try:
+                lock.acquire(timeout=0.5)
+                break
+            except Timeout:
+                raise_if_pending()
+        self._held[run_id] = lock
 
     def set_tags(self, run_id: str, tags: Mapping[str, Any]) -> None:
         from mlflow.entities import RunTag
@@ -357,23 +419,72 @@ class Tracker:
             f"tags.stage = 'train' and tags.train_key = '{train_key}' and attributes.status = 'FINISHED'"
         )
 
-    def mark_orphans_killed(self, train_key: str) -> list[str]:
-        """Runs of this key left RUNNING by a process on this host that no longer exists.
+    def finished_evaluation(self, evaluation_key: str, train_run_id: str | None) -> Any | None:
+        """The newest FINISHED evaluation with this key (of this training run), if any."""
+        found = self.search(f"tags.stage = 'eval' and tags.evaluation_key = '{evaluation_key}' "
+                            "and attributes.status = 'FINISHED'")
+        for run in found:
+            if run.data.tags.get("train_run_id") == train_run_id:
+                return run
+        return None
 
-        A SIGKILLed job cannot close its run; the next job with the same key closes it as
-        KILLED so that the store says what happened (a resumed training reopens it).
+    def logged_steps(self, run_id: str) -> dict[str, int]:
+        """The last step logged of each metric of a run (what a resumed run must not log again)."""
+        run = self.get_run(run_id)
+        keys = list(run.data.metrics) if run is not None else []
+        return {key: max((m.step for m in retry(self.client.get_metric_history, run_id, key)), default=-1)
+                for key in keys}
+
+    def close_orphans(self) -> list[str]:
+        """Close as KILLED every RUNNING run of the experiment whose process is gone.
+
+        A SIGKILLed job cannot close its runs; the next job that opens the store does, so that
+        the store says what happened (a resumed training reopens its run). A run counts as
+        alive while some process holds its lock file; a run without a lock file here (another
+        machine, or a store shared without a shared launch dir) only when its host is this one
+        and its pid tag names a live process.
         """
         host, closed = socket.gethostname(), []
-        for run in self.search(f"tags.train_key = '{train_key}' and attributes.status = 'RUNNING'"):
-            tags = run.data.tags
-            if tags.get("host") == host and tags.get("pid", "").isdigit() and not _alive(int(tags["pid"])):
-                self.end(run.info.run_id, "KILLED")
-                closed.append(run.info.run_id)
+        for run in self.search("attributes.status = 'RUNNING'"):
+            run_id, tags = run.info.run_id, run.data.tags
+            if run_id in self._held:
+                continue
+            lock_file = self.location.run_locks / f"{run_id}.lock"
+            if lock_file.exists():
+                lock = FileLock(str(lock_file))
+                try:
+                    lock.acquire(timeout=0)
+                except Timeout:
+                    continue  # a live process holds it
+                try:
+                    now = self.get_run(run_id)  # read again under the lock: it may have ended meanwhile
+                    if now is not None and now.info.status == "RUNNING":
+                        self._write(self.client.set_terminated, run_id, status="KILLED")
+                        closed.append(run_id)
+                    lock_file.unlink(missing_ok=True)
+                finally:
+                    lock.release()
+            elif tags.get("host") == host and tags.get("pid", "").isdigit() and not _alive(int(tags["pid"])):
+                self._write(self.client.set_terminated, run_id, status="KILLED")
+                closed.append(run_id)
         return closed
 
     def download(self, run_id: str, artifact_path: str, dst: Path) -> Path:
         dst.mkdir(parents=True, exist_ok=True)
         return Path(retry(self.client.download_artifacts, run_id, artifact_path, str(dst)))
+
+
+def _store_problem(uri: str, error: Exception) -> str:
+    """One line on why MLflow cannot open the store, saying so when another version wrote it."""
+    import mlflow
+
+    text = " ".join(str(error).split())
+    lowered = text.lower()
+    if "schema" in lowered or "revision" in lowered or "alembic" in lowered or "upgrade" in lowered:
+        return (f"the MLflow store {uri} was written by another version of MLflow (this is mlflow "
+                f"{mlflow.__version__}, which hgm_repro pins): {text}. Use the version that wrote it, back "
+                f"the store up and run `mlflow db upgrade {uri}`, or use another tracking.uri.")
+    return f"cannot open the MLflow store {uri}: {text}"
 
 
 def _alive(pid: int) -> bool:
@@ -427,7 +538,7 @@ class SweepTracking(Callback):
             validate(OmegaConf.masked_copy(config, [k for k in config if k != "hydra"]))
         except ConfigError as error:
             print(f"hgm_repro: {error}\nnothing was launched.", file=sys.stderr)
-            raise SystemExit(1) from error
+            raise SystemExit(2) from error
         tracker = self._open(config)
         if tracker is None:
             return

@@ -62,3 +62,22 @@ def train_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     """A short hex digest of `training_config(cfg)`; stable across runs and machines."""
     payload = json.dumps(training_config(cfg), sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(payload.encode()).hexdigest()[:KEY_LENGTH]
+
+
+# Root keys that say where results go or whether to train again, not what an evaluation measures.
+NON_EVALUATION_KEYS = frozenset({"tracking", "force_retrain", "hydra"})
+
+
+def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
+    """The evaluation identity: a short digest of the whole job config except `NON_EVALUATION_KEYS`.
+
+    With the training run it evaluates, it names one evaluation: a job whose evaluation already
+    FINISHED (a sweep run again after a crash, a requeued job) does not evaluate again.
+    """
+    if isinstance(cfg, JobConfig):
+        root = cfg.resolved
+    else:
+        root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+    payload = {k: v for k, v in root.items() if k not in NON_EVALUATION_KEYS}
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]

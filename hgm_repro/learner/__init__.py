@@ -11,7 +11,8 @@ trees are replaced by pure-torch ones (`priority_trees.py`); the sampler itself 
 
 Checkpoints and resume
 ----------------------
-`checkpoint_dir/last.pt` is written every `learner.checkpoint_every` env steps and at the end,
+`checkpoint_dir/last.pt` is written every `learner.checkpoint_every` env steps, at the end, and
+when a stop signal (`hgm_repro.experiment.interrupts`) ends the run between two batches,
 `final.pt` at the end; each write goes to a temporary file first and is renamed into place, so a
 run killed while writing keeps the previous checkpoint. A checkpoint holds:
 

@@ -26,7 +26,7 @@ from tqdm import tqdm
 from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
 from ..experiment.checkpoint import BEST_CHECKPOINT, load_checkpoint, recorded_training_config, save_checkpoint
-from ..experiment.interrupts import raise_if_pending
+from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
 from ..experiment.schema import JobConfig
 from ..experiment.train_key import train_key
 from ..metrics import TRAINING_CURVE_METRICS
@@ -192,6 +192,16 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         metrics["val/best_episode_return"] = best_val
         return metrics
 
+    def stop(interrupted: JobInterrupted | None = None) -> None:
+        """A stop signal ends training between batches, never inside one: last.pt holds everything
+        up to this batch (a resume loses nothing), then the signal is raised."""
+        save_checkpoint(checkpoint_state(finished=steps_done >= total_steps), last_path)
+        progress.close()
+        collector.shutdown()
+        if interrupted is not None:
+            raise interrupted
+        raise_if_pending()
+
     progress = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {job.model.name}",
                     disable=not sys.stdout.isatty(), dynamic_ncols=True)
     episodes: dict[str, list[float]] = {k: [] for k in TRAINING_CURVE_METRICS}
@@ -201,7 +211,6 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
 
     # --- the loop: collect one step of every env, store it, learn, log, checkpoint ---------------
     for batch in collector:
-        raise_if_pending()  # a SIGTERM stops training here, between batches, never inside one
         batch: TensorDictBase = batch.reshape(n_envs, -1)  # [envs, time]
         steps_before, steps_done = steps_done, steps_done + batch.numel()
         exploration.step(batch.numel())
@@ -263,8 +272,12 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
                             "train/updates": float(updates_done)})
             if val_env is not None and (steps_done // eval_every > steps_before // eval_every
                                         or steps_done >= total_steps):
-                metrics.update(validate())
-            log(metrics, steps_done)
+                try:
+                    metrics.update(validate())
+                except JobInterrupted as interrupted:  # stopped between validation steps
+                    stop(interrupted)
+            with deferred():  # a signal during the store write waits for the stop below, after last.pt
+                log(metrics, steps_done)
             if progress.disable:  # no bar when output goes to a file: a line per log interval instead
                 logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h",
                             job.model.name, steps_done, total_steps, metrics["train/steps_per_s"],
@@ -275,6 +288,9 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
 
         if steps_done // L.checkpoint_every > steps_before // L.checkpoint_every and steps_done < total_steps:
             save_checkpoint(checkpoint_state(finished=False), last_path)
+
+        if pending() and steps_done < total_steps:
+            stop()
 
     progress.close()
     collector.shutdown()

@@ -1,12 +1,30 @@
-"""The paper's five-lane heterogeneous highway as a batched torch simulator."""
+"""The paper's five-lane heterogeneous highway as a batched torch simulator.
+
+The configs are imported at once; the torch parts when first used, so that validating a job's
+config (`hgm_repro.experiment.schema`) answers without loading torch.
+"""
+
+from importlib import import_module
+from typing import Any
 
 from .config import ConfigError, RewardConfig, SafetyConfig, ScenarioConfig, SimulatorConfig, VehicleType
-from .highway import HighwaySimulator, StepResult, episode_metrics
-from .reward import RewardTerms, speed_reward
-from .state import HOST, N_ACTIONS, Action, TrafficState
+
+_LAZY = {
+    "HighwaySimulator": ".highway", "StepResult": ".highway", "episode_metrics": ".highway",
+    "RewardTerms": ".reward", "speed_reward": ".reward",
+    "HOST": ".state", "N_ACTIONS": ".state", "Action": ".state", "TrafficState": ".state",
+}
 
 __all__ = [
     "Action", "ConfigError", "HOST", "HighwaySimulator", "N_ACTIONS", "RewardConfig", "RewardTerms",
     "SafetyConfig", "ScenarioConfig", "SimulatorConfig", "StepResult", "TrafficState", "VehicleType",
     "episode_metrics", "speed_reward",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    if name not in _LAZY:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(import_module(_LAZY[name], __name__), name)
+    globals()[name] = value
+    return value
