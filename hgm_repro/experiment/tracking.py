@@ -180,7 +180,7 @@ def _chunks(items: list[T], size: int) -> Iterable[list[T]]:
 
 
 class Tracker:
-    """One experiment in one store; all writes retried and shielded from SIGTERM mid-write."""
+    """One experiment in one store; all writes retried and shielded from stop signals mid-write."""
 
     def __init__(self, location: StoreLocation, experiment_name: str) -> None:
         from mlflow.tracking import MlflowClient
