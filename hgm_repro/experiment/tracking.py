@@ -192,6 +192,7 @@ class Tracker:
         self._held: dict[str, FileLock] = {}  # run id -> the lock that says this process runs it
         with FileLock(str(location.lock_path)):
             try:
+                _create_sqlite_store_atomically(location.tracking_uri)
                 self.client = MlflowClient(tracking_uri=location.tracking_uri)
                 experiment = retry(self._get_or_create_experiment, experiment_name)
             except Exception as error:
@@ -472,6 +473,28 @@ class Tracker:
     def download(self, run_id: str, artifact_path: str, dst: Path) -> Path:
         dst.mkdir(parents=True, exist_ok=True)
         return Path(retry(self.client.download_artifacts, run_id, artifact_path, str(dst)))
+
+
+def _create_sqlite_store_atomically(uri: str) -> None:
+    """Make a new SQLite store under another name and rename it into place.
+
+    MLflow creates a store by running its schema migrations, many statements long: a job killed
+    in the middle would leave a half-made store that no later job can open.
+    """
+    from mlflow.tracking import MlflowClient
+
+    prefix = "sqlite:///"
+    if not uri.startswith(prefix):
+        return
+    db = Path(uri[len(prefix):])
+    if db.exists():
+        return
+    db.parent.mkdir(parents=True, exist_ok=True)
+    for stale in db.parent.glob(f".{db.name}.creating-*"):  # what killed creators left (we hold the store lock)
+        stale.unlink(missing_ok=True)
+    tmp = db.with_name(f".{db.name}.creating-{os.getpid()}")
+    MlflowClient(tracking_uri=f"{prefix}{tmp}").search_experiments(max_results=1)  # runs the migrations
+    os.replace(tmp, db)
 
 
 def _store_problem(uri: str, error: Exception) -> str:
