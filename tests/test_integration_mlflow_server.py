@@ -130,11 +130,21 @@ def test_jobs_log_to_a_remote_server_on_postgres(mlflow_server: str, tmp_path: P
 
     client = MlflowClient(tracking_uri=mlflow_server)
     experiment = client.get_experiment_by_name("hgm_repro")
-    runs = client.search_runs([experiment.experiment_id], max_results=100)
+    every_run = client.search_runs([experiment.experiment_id], max_results=100)
+    assert {r.info.status for r in every_run} == {"FINISHED"}
+    # Each single job is a launch: a parent run (no stage tag) over the runs it made.
+    launches = {r.info.run_id: r for r in every_run if r.data.tags.get("launch") == "job"}
+    runs = [r for r in every_run if r.info.run_id not in launches]
     train = [r for r in runs if r.data.tags.get("stage") == "train"]
     evals = [r for r in runs if r.data.tags.get("stage") == "eval"]
-    assert len(train) == 1 and len(evals) == 2
-    assert {r.info.status for r in runs} == {"FINISHED"}
+    assert len(launches) == 2 and len(train) == 1 and len(evals) == 2 and len(runs) == 3
+    assert {r.data.tags["mlflow.parentRunId"] for r in runs} == set(launches)
+    for launch_run in launches.values():
+        assert "stage" not in launch_run.data.tags and launch_run.data.tags["sweep"] == "false"
+        (child,) = [r for r in evals if r.data.tags["mlflow.parentRunId"] == launch_run.info.run_id]
+        scenario = child.data.tags["scenario"]
+        summary = launch_run.data.metrics[f"grid/proposed/scenario{scenario}/episode_return"]
+        assert summary == pytest.approx(child.data.metrics["eval/episode_return"], rel=1e-4)
     key = train[0].data.tags["train_key"]
     for run in runs:
         for tag in ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty"):
@@ -147,6 +157,8 @@ def test_jobs_log_to_a_remote_server_on_postgres(mlflow_server: str, tmp_path: P
         assert all(name in r.data.metrics for r in evals), name
     assert train[0].data.params["learner.total_steps"] == "256"
     # Artifacts went through the server; the checkpoint also stays in the launch dir.
-    assert [a.path for a in client.list_artifacts(train[0].info.run_id, "checkpoint")] == ["checkpoint/final.pt"]
+    # (smoke validates every 128 steps, so the best network goes up beside the final one)
+    assert [a.path for a in client.list_artifacts(train[0].info.run_id, "checkpoint")] == [
+        "checkpoint/best.pt", "checkpoint/final.pt"]
     assert {"config.yaml", "episodes.csv"} <= {a.path for a in client.list_artifacts(evals[0].info.run_id)}
     assert (launch / "checkpoints" / key / "final.pt").is_file()
