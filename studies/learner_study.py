@@ -39,6 +39,12 @@ ARMS: dict[str, list[str]] = {
     "nstep_camera": DQN_FIXES + CAMERA,
     "nstep_camera_4frames": DQN_FIXES + CAMERA + ["observation.frame_stack=4"],
     "nstep_camera_gamma95": DQN_FIXES + CAMERA + ["learner.gamma=0.95"],
+    # Seeds 0-3 of the first grid run with the nstep preset: only one host of four learned to stop
+    # crashing by 80k steps (training episodes ended in a crash almost every time, at epsilon 0.05).
+    # Two suspects: a 100-step horizon (gamma 0.99) whose values dwarf the crash and take long to
+    # propagate, and exploration crashes (5% random actions, lane changes into occupied lanes).
+    "nstep_gamma95": DQN_FIXES + ["learner.gamma=0.95"],
+    "nstep_gamma95_eps01": DQN_FIXES + ["learner.gamma=0.95", "learner.eps_end=0.01"],
 }
 
 
