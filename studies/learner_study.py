@@ -45,6 +45,9 @@ ARMS: dict[str, list[str]] = {
     # propagate, and exploration crashes (5% random actions, lane changes into occupied lanes).
     "nstep_gamma95": DQN_FIXES + ["learner.gamma=0.95"],
     "nstep_gamma95_eps01": DQN_FIXES + ["learner.gamma=0.95", "learner.eps_end=0.01"],
+    "nstep_eps01": DQN_FIXES + ["learner.eps_end=0.01"],
+    # Twice the budget: does the host that learns at 50-60k steps on some seeds learn on all?
+    "nstep_160k": DQN_FIXES + ["learner.total_steps=160000"],
 }
 
 
