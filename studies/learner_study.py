@@ -48,6 +48,13 @@ ARMS: dict[str, list[str]] = {
     "nstep_eps01": DQN_FIXES + ["learner.eps_end=0.01"],
     # Twice the budget: does the host that learns at 50-60k steps on some seeds learn on all?
     "nstep_160k": DQN_FIXES + ["learner.total_steps=160000"],
+    # Not crashing pays only over a long horizon: at Table 2's rewards, driving at 75 km/h and
+    # crashing after 30 decisions earns more than 30 decisions at 50 km/h, and loses only over
+    # the ~100 decisions that gamma 0.99 weighs (gamma 0.95 made crashing the better deal). That
+    # value travels back n decisions per target update, so longer n-step windows or more frequent
+    # target updates should make the host learn it sooner.
+    "nstep10": ["learner.n_step=10", "learner.double_dqn=true", "learner.loss_function=smooth_l1"],
+    "nstep_target250": DQN_FIXES + ["learner.target_update_steps=250"],
 }
 
 
