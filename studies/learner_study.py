@@ -1,7 +1,7 @@
 """The learner study: which options make the quick preset's host learn to drive.
 
     python studies/learner_study.py run --arms base nstep --seeds 100 101 [--parallel 2]
-    python studies/learner_study.py report [--out docs/study]
+    python studies/learner_study.py report [--store A.db B.db] [--out docs/study]
 
 `run` trains and evaluates each (arm, seed) with `python -m hgm_repro` in the training traffic,
 into one SQLite store (`studies/runs/study.db` by default; the runs resume if interrupted);
@@ -93,7 +93,8 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--parallel", type=int, default=2, help="jobs at once (one torch thread each)")
     r.add_argument("--store", type=Path, default=RUNS / "study.db")
     rep = sub.add_parser("report", help="curves and final results from the store")
-    rep.add_argument("--store", type=Path, default=RUNS / "study.db")
+    rep.add_argument("--store", type=Path, nargs="+", default=[RUNS / "study.db"],
+                     help="one or more study stores (e.g. one per session)")
     rep.add_argument("--out", type=Path, default=ROOT / "docs" / "study")
     a = p.parse_args(argv)
     if a.cmd == "run":

@@ -20,7 +20,11 @@ from omegaconf import OmegaConf  # noqa: E402
 
 from analysis.stats import mean_ci  # noqa: E402
 
-CURVES = ("episode_return", "collisions", "avg_speed_kmh")
+# Training curves (with exploration) and the greedy validation return (no exploration, seeds no
+# test uses): the second shows when a host has learned, the first how it explored.
+CURVES = ("train/episode_return", "train/collisions", "train/avg_speed_kmh", "val/episode_return")
+# The reference hosts the study also tests on each tuning seed (no training, same traffic).
+REFERENCE_HOSTS = ("human", "idm_mobil_limits")
 RESULTS = ("episode_return", "collisions", "dangerous_actions", "avg_speed_kmh", "lane_changes", "overtakes")
 
 
@@ -55,52 +59,59 @@ def signature_default(key: str, signatures: dict[str, dict[str, object]]) -> obj
     return signatures["base"][key]
 
 
-def load(store: Path) -> tuple[pd.DataFrame, pd.DataFrame]:
-    client = MlflowClient(tracking_uri=f"sqlite:///{store.resolve()}")
-    experiment = client.get_experiment_by_name("hgm_repro")
-    runs = client.search_runs([experiment.experiment_id], max_results=5000)
+def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Per-seed test results (learned arms and reference hosts) and learning curves of the stores."""
     signatures = arm_signatures()
     results, curves = [], []
-    for r in runs:
-        tags = r.data.tags
-        arm = _arm_of(r.data.params, signatures)
-        if r.info.status != "FINISHED" or arm is None or "seed" not in tags or tags.get("model") != "proposed":
-            continue
-        seed = int(tags["seed"])
-        if tags.get("stage") == "eval":
-            results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
-        elif tags.get("stage") == "train":
-            for m in CURVES:
-                for point in client.get_metric_history(r.info.run_id, f"train/{m}"):
-                    curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step, "value": point.value})
+    for store in stores:
+        client = MlflowClient(tracking_uri=f"sqlite:///{store.resolve()}")
+        experiment = client.get_experiment_by_name("hgm_repro")
+        for r in client.search_runs([experiment.experiment_id], max_results=5000):
+            tags = r.data.tags
+            if r.info.status != "FINISHED" or "seed" not in tags:
+                continue
+            model = tags.get("model")
+            arm = model if model in REFERENCE_HOSTS else _arm_of(r.data.params, signatures)
+            if arm is None or model not in ("proposed", *REFERENCE_HOSTS):
+                continue
+            seed = int(tags["seed"])
+            if tags.get("stage") == "eval":
+                results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
+            elif tags.get("stage") == "train":
+                for m in CURVES:
+                    for point in client.get_metric_history(r.info.run_id, m):
+                        curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step,
+                                       "value": point.value})
     return pd.DataFrame(results), pd.DataFrame(curves)
 
 
-def report(store: Path, out: Path) -> None:
+def report(stores: list[Path], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    results, curves = load(store)
+    results, curves = load(stores)
     results = results.drop_duplicates(["arm", "seed"], keep="first").sort_values(["arm", "seed"])
     results.to_csv(out / "learner_study_per_seed.csv", index=False)
     rows = []
     for arm, grp in results.groupby("arm", sort=False):
-        row = {"arm": arm, "overrides": " ".join(ARMS[arm]) or "(quick preset)", "seeds": len(grp)}
+        overrides = f"model={arm}" if arm in REFERENCE_HOSTS else " ".join(ARMS[arm])
+        row = {"arm": arm, "overrides": overrides, "seeds": len(grp)}
         for m in RESULTS:
             est = mean_ci(grp[m].to_numpy(dtype=float))
             row[m] = est.point
             row[f"{m}_lo"], row[f"{m}_hi"] = est.low, est.high
         rows.append(row)
-    summary = pd.DataFrame(rows).set_index("arm").reindex([a for a in ARMS if a in set(results["arm"])])
+    order = [a for a in (*ARMS, *REFERENCE_HOSTS) if a in set(results["arm"])]
+    summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
 
-    fig, axes = plt.subplots(1, len(CURVES), figsize=(5 * len(CURVES), 3.8))
+    fig, axes = plt.subplots(1, len(CURVES), figsize=(4.6 * len(CURVES), 3.8))
     for ax, metric in zip(axes, CURVES, strict=True):
         sel = curves[curves["metric"] == metric]
         for arm in [a for a in ARMS if a in set(sel["arm"])]:
             by_step = sel[sel["arm"] == arm].groupby("step")["value"]
-            mean = by_step.mean().rolling(3, min_periods=1).mean()
+            mean = by_step.mean().rolling(1 if metric.startswith("val/") else 3, min_periods=1).mean()
             ax.plot(mean.index, mean.values, label=f"{arm} ({sel[sel['arm'] == arm]['seed'].nunique()} seeds)")
         ax.set_xlabel("env steps")
-        ax.set_title(f"train/{metric}")
+        ax.set_title(metric + (" (greedy)" if metric.startswith("val/") else " (epsilon-greedy)"))
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "learner_study_curves.png", dpi=110)
