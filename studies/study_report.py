@@ -109,7 +109,10 @@ def report(stores: list[Path], out: Path) -> None:
         for arm in [a for a in ARMS if a in set(sel["arm"])]:
             by_step = sel[sel["arm"] == arm].groupby("step")["value"]
             mean = by_step.mean().rolling(1 if metric.startswith("val/") else 3, min_periods=1).mean()
-            ax.plot(mean.index, mean.values, label=f"{arm} ({sel[sel['arm'] == arm]['seed'].nunique()} seeds)")
+            seeds = sel[sel["arm"] == arm]["seed"].nunique()
+            # One colour per arm in every panel, whichever arms a panel has.
+            ax.plot(mean.index, mean.values, color=f"C{list(ARMS).index(arm) % 10}",
+                    label=f"{arm} ({seeds} seed{'s' if seeds > 1 else ''})")
         ax.set_xlabel("env steps")
         ax.set_title(metric + (" (greedy)" if metric.startswith("val/") else " (epsilon-greedy)"))
     axes[0].legend(fontsize=7)
