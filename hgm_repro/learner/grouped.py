@@ -224,6 +224,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
     parts = []
     for k, member in enumerate(members):
         job = member.job
+        torch.manual_seed(job.seed)  # a member starts from the weights its solo run would start from
         net = make_network(job).to(device)
         actor = make_actor(net).to(device)
         loss_module = make_loss(L, actor).to(device)
@@ -262,6 +263,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
                       "val_env": val_env, "best_val": best_val, "train_key": train_key(job),
                       "config": recorded_training_config(job),
                       "episodes": {key: [] for key in TRAINING_CURVE_METRICS}, "losses": []})
+    torch.manual_seed(job0.seed)
     if resume0:
         _set_rng_state(resume0["rng"])
 
