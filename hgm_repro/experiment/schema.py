@@ -86,6 +86,7 @@ class LearnerSchema:
     torch_threads: int = field(default=0, metadata=ge(0))
     compile: bool = False
     cuda_graph: bool = False
+    grouped: Literal["auto", True, False] = "auto"
 
 
 @dataclass(frozen=True)

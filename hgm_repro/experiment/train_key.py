@@ -29,7 +29,8 @@ KEY_LENGTH = 12
 # and `torch_threads` are execution strategies like `device`.
 NON_TRAINING_LEARNER_KEYS = frozenset(
     {"test_steps", "test_envs", "log_every", "checkpoint_every", "compile", "cuda_graph",
-     "checkpoint_buffer_max_mb", "torch_threads", "eval_every", "val_envs", "val_episodes"}
+     "checkpoint_buffer_max_mb", "torch_threads", "eval_every", "val_envs", "val_episodes",
+     "grouped"}
 )
 # Model values that name or describe the model without changing its training.
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
