@@ -50,3 +50,25 @@ def test_grouped_grid_killed_mid_training_then_rerun(tmp_path: Path) -> None:
     assert not [r for r in by_stage(store_runs(tmp_path), "eval")]  # killed before any job
     hgm(tmp_path, *GRID)
     _check_grouped(tmp_path)
+
+
+def test_grouped_grid_stopped_by_sigterm_checkpoints_every_member_then_resumes(tmp_path: Path) -> None:
+    from hgm_repro.experiment.checkpoint import load_checkpoint
+
+    log = tmp_path / "first.log"
+    sweep = subprocess.Popen(command(*GRID), cwd=tmp_path, env=environment(), stdout=log.open("w"),
+                             stderr=subprocess.STDOUT, start_new_session=True)
+    deadline = time.monotonic() + 600
+    while not list((tmp_path / "checkpoints").glob("*/last.pt")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+        assert sweep.poll() is None, log.read_text()[-3000:]
+    os.killpg(sweep.pid, signal.SIGTERM)
+    assert sweep.wait(timeout=300) != 0
+    stopped = [r for r in by_stage(store_runs(tmp_path), "train") if r.info.status != "FINISHED"]
+    assert stopped and {r.info.status for r in stopped} == {"KILLED"}, log.read_text()[-3000:]
+    # every stopped member wrote last.pt at the same safe point
+    steps = {load_checkpoint(tmp_path / "checkpoints" / r.data.tags["train_key"] / "last.pt")["env_steps"]
+             for r in stopped}
+    assert len(steps) == 1, steps
+    hgm(tmp_path, *GRID)
+    _check_grouped(tmp_path)
