@@ -148,3 +148,23 @@ def test_grouped_training_resumes_every_member(tmp_path: Path):
         state = load_checkpoint(final, job)
         assert state["finished"] and state["env_steps"] == job.learner.total_steps
         assert log.calls[0][0] > 64  # picked up after the checkpoint, not from the start
+
+
+def test_grouped_setting_changes_neither_train_key_nor_evaluation_key():
+    from hgm_repro.experiment.train_key import evaluation_key, train_key
+
+    solo, grouped = compose_job("learner.grouped=false"), compose_job("learner.grouped=true")
+    assert train_key(solo) == train_key(grouped) and evaluation_key(solo) == evaluation_key(grouped)
+
+
+def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
+    from hgm_repro.experiment.schema import validate
+    from hgm_repro.learner.grouped import use_grouped
+    from hgm_repro.simulator.config import ConfigError
+
+    from .test_learner import compose_cfg
+
+    assert use_grouped("auto", "cuda:0") and not use_grouped("auto", "cpu")
+    assert use_grouped(True, "cpu") and not use_grouped(False, "cuda")
+    with pytest.raises(ConfigError, match=r"learner.grouped='maybe' is not allowed: expected one of 'auto'"):
+        validate(compose_cfg("learner.grouped=maybe"))

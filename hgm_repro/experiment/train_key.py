@@ -67,6 +67,7 @@ def train_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
 
 # Root keys that say where results go or whether to train again, not what an evaluation measures.
 NON_EVALUATION_KEYS = frozenset({"tracking", "force_retrain", "hydra"})
+NON_EVALUATION_LEARNER_KEYS = frozenset({"grouped"})
 
 
 def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
@@ -80,5 +81,9 @@ def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     else:
         root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
     payload = {k: v for k, v in root.items() if k not in NON_EVALUATION_KEYS}
+    if isinstance(payload.get("learner"), Mapping):
+        # How the training was scheduled is not what an evaluation measures: a grouped sweep finds
+        # the evaluations of a solo one (and those of stores written before the setting existed).
+        payload["learner"] = {k: v for k, v in payload["learner"].items() if k not in NON_EVALUATION_LEARNER_KEYS}
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
