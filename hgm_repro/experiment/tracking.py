@@ -554,11 +554,11 @@ def _sweep_jobs(config: DictConfig) -> list[Any]:
     jobs = []
     for batch in batches:
         for job_overrides in batch:
-            cfg = compose(config_name=str(config.hydra.job.config_name), overrides=list(job_overrides))
             try:
+                cfg = compose(config_name=str(config.hydra.job.config_name), overrides=list(job_overrides))
                 jobs.append(validate(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])))
-            except ConfigError:
-                continue
+            except (ConfigError, ValueError, KeyError) as error:  # Hydra's own errors are ValueErrors too
+                log.debug("job %s left to itself: %s", job_overrides, error)
     return jobs
 
 
@@ -609,9 +609,21 @@ class SweepTracking(Callback):
         """Before the jobs start: train the sweep's trainings in groups where `learner.grouped` says
         so (`hgm_repro.learner.grouped`); the jobs then find them FINISHED and only evaluate."""
         from ..learner.grouped import use_grouped
+        from ..simulator.config import ConfigError
         from .interrupts import JobInterrupted, hand_on, signals_raise
         from .job import train_grouped
 
+        task = [str(o) for o in OmegaConf.to_container(config.hydra.overrides.task, resolve=False)]
+        # Expanding the sweep costs a compose per job: only when a job may group.
+        deciders = ("learner.grouped", "device", "learner", "experiment")
+        swept = any(o.split("=", 1)[0].lstrip("+~") in deciders for o in task)
+        try:
+            if not swept and not use_grouped(config.learner.grouped, str(config.device)):
+                log.info("learner.grouped=%s on %s: each job trains its own model (solo)", config.learner.grouped,
+                         config.device)
+                return
+        except (ValueError, ConfigError):
+            return  # a bad value: the jobs report it
         jobs = [job for job in _sweep_jobs(config) if job.model.learned]
         grouped = [job for job in jobs if use_grouped(job.learner.grouped, job.device)]
         if jobs:
