@@ -168,3 +168,24 @@ def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
     assert use_grouped(True, "cpu") and not use_grouped(False, "cuda")
     with pytest.raises(ConfigError, match=r"learner.grouped='maybe' is not allowed: expected one of 'auto'"):
         validate(compose_cfg("learner.grouped=maybe"))
+
+
+def test_bf16_update_is_cuda_only_and_float32_keeps_the_keys():
+    from hgm_repro.experiment.schema import validate
+    from hgm_repro.experiment.train_key import evaluation_key, train_key
+    from hgm_repro.simulator.config import ConfigError
+
+    from .test_learner import compose_cfg
+
+    with pytest.raises(ConfigError, match=r"learner.update_dtype=bfloat16 is not allowed with device='cpu'"):
+        validate(compose_cfg("learner.update_dtype=bfloat16"))
+    # float32 is how every stored training ran: left out of both keys, so they stay what they were
+    from omegaconf import open_dict
+
+    cfg = compose_cfg()
+    with open_dict(cfg):
+        del cfg.learner["update_dtype"]
+    before, now = validate(cfg), compose_job()
+    assert train_key(before) == train_key(now) and evaluation_key(before) == evaluation_key(now)
+    bf16 = compose_cfg("learner.update_dtype=bfloat16", "device=cuda")
+    assert train_key(bf16) != train_key(now)  # a bf16 training is another training

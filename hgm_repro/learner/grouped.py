@@ -294,6 +294,9 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
         _stack_adam_state(optimizer, params, names, nets, [p["optimizer"] for p in parts])
     in_keys = list(nets[0].in_keys)
     weight_key = parts[0]["loss"].tensor_keys.priority_weight
+    # learner.update_dtype=bfloat16: the forward passes in bf16 (CUDA only; validation refuses it
+    # elsewhere); weights, Adam and the priorities stay float32.
+    bf16 = L.update_dtype == "bfloat16" and device.type == "cuda"
     stacked_loss = _stacked_loss(base, in_keys, L.gamma, L.double_dqn, L.loss_function)
     forward = torch.func.vmap(lambda p, b, *obs: functional_call(base, (p, b), obs))
 
@@ -396,8 +399,10 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
             while update_credit >= 1.0:
                 update_credit -= 1.0
                 samples = [p["buffer"].sample() for p in parts]
-                loss, td_error = stacked_loss({n: params[n] for n in names}, buffers, target_params,
-                                              _update_inputs(samples, in_keys, weight_key))
+                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+                    loss, td_error = stacked_loss({n: params[n] for n in names}, buffers, target_params,
+                                                  _update_inputs(samples, in_keys, weight_key))
+                loss, td_error = loss.float(), td_error.float()
                 optimizer.zero_grad(set_to_none=False)
                 loss.sum().backward()  # member k's loss reaches only member k's slice
                 _clip_per_member([params[n].grad for n in names], L.max_grad_norm)
