@@ -260,6 +260,44 @@ def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, 
                 torch_threads=used)
 
 
+def bench_grouped_training(device: torch.device, total_steps: int, members: int, grouped: bool,
+                           threads: int) -> dict[str, Any]:
+    """Aggregate training speed of `members` seeds with the quick preset, end to end: trained as one
+    group (`hgm_repro.learner.grouped`, one vmapped update) or solo one after another, on `threads`
+    torch threads. `env_steps_per_s` and `updates_per_s` are summed over the members."""
+    import tempfile
+    from pathlib import Path
+
+    from .experiment.checkpoint import load_checkpoint
+    from .learner import train
+    from .learner.grouped import train_group
+
+    n_envs = 16 if device.type == "cpu" else 64
+    jobs = [_compose("experiment=quick", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
+                     f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
+                     f"learner.torch_threads={threads}", "learner.eval_every=0",
+                     f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+            for seed in range(members)]
+    before = torch.get_num_threads()
+    with tempfile.TemporaryDirectory() as tmp:
+        dirs = [Path(tmp) / f"member{k}" for k in range(members)]
+        start = time.perf_counter()
+        if grouped:
+            finals = train_group(jobs, dirs, [lambda metrics, step: None] * members)
+        else:
+            finals = [train(job, d, lambda metrics, step: None) for job, d in zip(jobs, dirs, strict=True)]
+        _sync(device)
+        elapsed = time.perf_counter() - start
+        updates = sum(int(load_checkpoint(f)["updates"]) for f in finals)
+        steps = sum(int(load_checkpoint(f)["env_steps"]) for f in finals)
+    torch.set_num_threads(before)
+    return dict(what="learner training, members (quick preset, end to end)", device=str(device), members=members,
+                path="grouped" if grouped else "solo, one after another", n_envs=n_envs * members, camera="front",
+                hgm="paper", image=f"{jobs[0].observation.height}x{jobs[0].observation.width}",
+                env_steps_per_s=round(steps / elapsed, 1), updates_per_s=round(updates / elapsed, 2),
+                torch_threads=threads)
+
+
 def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[str, Any] | None:
     try:
         import gymnasium as gym
@@ -288,7 +326,7 @@ def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[s
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hgm_repro.bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", choices=["simulator", "observations", "envs", "learner", "highway"],
+    parser.add_argument("--only", choices=["simulator", "observations", "envs", "learner", "grouped", "highway"],
                         action="append",
                         help="measure only these parts (repeatable); default: all")
     parser.add_argument("--n-envs", default="1,64,256,1024,4096",
@@ -302,6 +340,11 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--train-steps", type=int, default=2048,
                         help="env steps of the end-to-end training measurement (x8 on CUDA) (%(default)s)")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
+    parser.add_argument("--members", default="1,5",
+                        help="training members of the grouped-training lines (default: %(default)s; 15 on a GPU "
+                             "is the paper's grid)")
+    parser.add_argument("--grouped-steps", type=int, default=None,
+                        help="env steps per member of the grouped-training lines (default: --train-steps)")
     parser.add_argument("--device", choices=["cpu", "cuda", "all"], default="all",
                         help="which devices to measure (default: every one present)")
     args = parser.parse_args(argv)
@@ -312,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("torchrl").setLevel(logging.WARNING)
     if args.threads:
         torch.set_num_threads(args.threads)
-    parts = set(args.only or ["simulator", "observations", "envs", "learner", "highway"])
+    parts = set(args.only or ["simulator", "observations", "envs", "learner", "grouped", "highway"])
     devices = []
     if args.device in ("cpu", "all"):
         devices.append(torch.device("cpu"))
@@ -353,6 +396,20 @@ def main(argv: list[str] | None = None) -> int:
                 emit(bench_learner_updates(device, args.seconds, mode=mode))
             print(f"learner training on {device}...", file=sys.stderr)
             emit(bench_learner_training(device, total_steps=args.train_steps * (8 if gpu else 1)))
+        if "grouped" in parts:
+            cores = torch.get_num_threads()
+            steps = (args.grouped_steps or args.train_steps) * (8 if gpu else 1)
+            # The acceptance line: one member alone on one thread, the baseline the rest compare to.
+            print(f"learner training, one member solo on one thread, on {device}...", file=sys.stderr)
+            alone = bench_grouped_training(device, steps, 1, grouped=False, threads=1)
+            emit(alone)
+            for members in [int(x) for x in args.members.split(",") if x]:
+                for grouped in (False, True):
+                    print(f"learner training, {members} members {'grouped' if grouped else 'solo'} on {device}...",
+                          file=sys.stderr)
+                    row = bench_grouped_training(device, steps, members, grouped=grouped, threads=cores)
+                    row["vs_one_member_one_thread"] = round(row["env_steps_per_s"] / alone["env_steps_per_s"], 3)
+                    emit(row)
     if "highway" in parts:
         for observation in ("Kinematics", "Grayscale"):
             print(f"highway-env ({observation})...", file=sys.stderr)

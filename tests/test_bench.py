@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from hgm_repro.bench import main
 
 REQUIRED = {"what", "device", "n_envs", "camera", "env_steps_per_s"}
@@ -37,3 +39,15 @@ def test_bench_measures_the_torchrl_env_and_the_gymnasium_vector_env_side_by_sid
         assert REQUIRED <= set(row) and row["n_envs"] == 3 and row["env_steps_per_s"] > 0
         assert (row["camera"], row["hgm"], row["image"]) == ("front", "paper", "84x84")
     assert rows[1]["vs_torchrl_env"] == round(rows[1]["env_steps_per_s"] / rows[0]["env_steps_per_s"], 3)
+
+
+@pytest.mark.slow  # five short trainings: about a minute on a busy CPU
+def test_bench_grouped_training_lines_for_members_grouped_and_solo(capsys):
+    assert main(["--only", "grouped", "--train-steps", "128", "--members", "2", "--device", "cpu"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert [(r["members"], r["path"], r["torch_threads"] == 1) for r in rows][:1] == \
+        [(1, "solo, one after another", True)]
+    assert {(r["members"], r["path"]) for r in rows[1:]} == {(2, "grouped"), (2, "solo, one after another")}
+    for row in rows:
+        assert REQUIRED <= set(row) and row["env_steps_per_s"] > 0 and row["updates_per_s"] > 0
+    assert all("vs_one_member_one_thread" in r for r in rows[1:])

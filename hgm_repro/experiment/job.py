@@ -236,6 +236,21 @@ def _train(
 ) -> Training:
     if train_fn is None:
         from ..learner import train as train_fn
+
+    run_id, how, log_to_run = _open_training(job, key, tracker, tags, parent_run_id, checkpoint_dir, unfinished)
+    with _run_status(tracker, run_id):
+        with tracker.system_metrics(run_id, job.tracking.system_metrics):
+            checkpoint = Path(train_fn(job, checkpoint_dir, log_to_run)).resolve()
+        _log_trained(job, tracker, run_id, checkpoint)
+    return Training(how, run_id, checkpoint)
+
+
+def _open_training(
+    job: JobConfig, key: str, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None,
+    checkpoint_dir: Path, unfinished: str | None,
+) -> tuple[str, str, Callable[[dict[str, float], int], None]]:
+    """Start (or reopen, to resume) the key's training run; returns its id, how it trains, and the
+    `log` callable the learner writes `train/*` curves through."""
     from ..learner.builders import make_network
     from ..networks import param_counts
 
@@ -265,21 +280,75 @@ def _train(
         if new:
             tracker.log_metrics(run_id, new, step)
 
-    with _run_status(tracker, run_id):
-        with tracker.system_metrics(run_id, job.tracking.system_metrics):
-            checkpoint = Path(train_fn(job, checkpoint_dir, log_to_run)).resolve()
-        tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
-        best = checkpoint.with_name(BEST_CHECKPOINT)
-        if best.is_file():
-            tracker.log_artifact(run_id, best, CHECKPOINT_ARTIFACT)
-        if job.tracking.log_model:
-            import torch
+    return run_id, how, log_to_run
 
-            from ..evaluation.policies import trained_network
 
-            tracker.log_model(run_id, trained_network(job, checkpoint, torch.device("cpu")))
-        tracker.set_tags(run_id, {"checkpoint_path": str(checkpoint)})
-    return Training(how, run_id, checkpoint)
+def _log_trained(job: JobConfig, tracker: Tracker, run_id: str, checkpoint: Path) -> None:
+    """A finished training's artifacts: final.pt (and best.pt), the MLflow model, the checkpoint's path."""
+    tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
+    best = checkpoint.with_name(BEST_CHECKPOINT)
+    if best.is_file():
+        tracker.log_artifact(run_id, best, CHECKPOINT_ARTIFACT)
+    if job.tracking.log_model:
+        import torch
+
+        from ..evaluation.policies import trained_network
+
+        tracker.log_model(run_id, trained_network(job, checkpoint, torch.device("cpu")))
+    tracker.set_tags(run_id, {"checkpoint_path": str(checkpoint)})
+
+
+def train_grouped(jobs: list[JobConfig], tracker: Tracker, parent_run_id: str | None) -> list[str]:
+    """Train the jobs' distinct, not yet finished trainings in groups (`hgm_repro.learner.grouped`):
+    each member is its own training run under `parent_run_id`, exactly as a job's solo training
+    would be, so that the jobs afterwards find them FINISHED and only evaluate. Returns the
+    train_keys trained. A key another process holds the lock of is left to the jobs."""
+    from contextlib import ExitStack
+
+    from ..learner.grouped import group_key, train_group
+
+    commit, dirty = git_info()
+    groups: dict[str, list[JobConfig]] = {}
+    seen: set[str] = set()
+    for job in jobs:
+        key = train_key(job)
+        if not job.model.learned or key in seen or job.force_retrain or tracker.finished_trainings(key):
+            continue
+        seen.add(key)
+        groups.setdefault(group_key(job), []).append(job)
+    trained: list[str] = []
+    for members in groups.values():
+        with ExitStack() as stack:
+            ready, opened = [], []
+            for job in members:
+                key = train_key(job)
+                checkpoint_dir = tracker.location.checkpoint_root / key
+                checkpoint_dir.mkdir(parents=True, exist_ok=True)
+                lock = FileLock(str(checkpoint_dir / "train.lock"))
+                try:
+                    lock.acquire(timeout=0)
+                except Timeout:
+                    continue  # another process trains it; its jobs wait for that one
+                stack.callback(lock.release)
+                ready.append((job, key, checkpoint_dir))
+            if len(ready) < 2:
+                continue  # nothing to group: the jobs train it solo
+            for job, key, checkpoint_dir in ready:
+                tags = {"model": job.model.name, "seed": job.seed, "train_key": key, "git_commit": commit,
+                        "git_dirty": dirty, "experiment": job.experiment.name, "device": job.device,
+                        "grouped": len(ready), "trained_by_pid": os.getpid()}
+                unfinished = _unfinished_training(tracker, checkpoint_dir)
+                run_id, _, log_to_run = _open_training(job, key, tracker, tags, parent_run_id, checkpoint_dir,
+                                                       unfinished)
+                stack.enter_context(_run_status(tracker, run_id))  # KILLED / FAILED / FINISHED, as solo
+                opened.append((run_id, log_to_run))
+            log.info("grouped training of %d members of model '%s' (seeds %s)", len(ready),
+                     ready[0][0].model.name, [job.seed for job, _, _ in ready])
+            finals = train_group([job for job, _, _ in ready], [d for _, _, d in ready], [lg for _, lg in opened])
+            for (job, key, _), (run_id, _), final in zip(ready, opened, finals, strict=True):
+                _log_trained(job, tracker, run_id, Path(final).resolve())
+                trained.append(key)
+    return trained
 
 
 def _training_description(job: JobConfig, key: str, checkpoint_dir: Path) -> str:

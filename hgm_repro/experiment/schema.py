@@ -86,6 +86,8 @@ class LearnerSchema:
     torch_threads: int = field(default=0, metadata=ge(0))
     compile: bool = False
     cuda_graph: bool = False
+    grouped: Literal["auto", True, False] = "auto"
+    update_dtype: Literal["float32", "bfloat16"] = "float32"
 
 
 @dataclass(frozen=True)
@@ -283,6 +285,10 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
             f"must be >= learner.batch_size={learner.batch_size}"
         )
 
+    if isinstance(learner, LearnerSchema) and learner.update_dtype == "bfloat16" \
+            and not str(root.get("device", "")).startswith("cuda"):
+        errors.append(f"learner.update_dtype=bfloat16 is not allowed with device={root.get('device')!r}: bf16 "
+                      "autocast of the update is for CUDA only (use learner.update_dtype=float32 here)")
     _check_eval(parts["eval"], parts["model"], parts["learner"], errors)
     _check_tracking(parts["tracking"], errors)
 

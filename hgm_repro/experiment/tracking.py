@@ -537,6 +537,31 @@ def launch_description(kind: str, overrides: str, where: Path) -> str:
             "runs nested under it.")
 
 
+def _sweep_jobs(config: DictConfig) -> list[Any]:
+    """The validated config of every job of a basic-sweeper sweep (other sweepers choose their
+    jobs as they go: none). A job whose values do not validate is left out; it reports itself."""
+    from hydra import compose
+    from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    from ..simulator.config import ConfigError
+    from .schema import validate
+
+    if not str(config.hydra.sweeper.get("_target_", "")).endswith("BasicSweeper"):
+        return []
+    overrides = OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
+    batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(overrides), None)
+    jobs = []
+    for batch in batches:
+        for job_overrides in batch:
+            try:
+                cfg = compose(config_name=str(config.hydra.job.config_name), overrides=list(job_overrides))
+                jobs.append(validate(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])))
+            except (ConfigError, ValueError, KeyError) as error:  # Hydra's own errors are ValueErrors too
+                log.debug("job %s left to itself: %s", job_overrides, error)
+    return jobs
+
+
 class SweepTracking(Callback):
     """Hydra callback: one MLflow parent run per sweep, created before any job starts.
 
@@ -578,6 +603,43 @@ class SweepTracking(Callback):
         atexit.register(self._close, "FAILED")
         log.info("MLflow parent run %s (%s); runs: %s", self._parent, tracker.location.tracking_uri,
                  tracker.ui_url())
+        self._train_grouped(config, tracker)
+
+    def _train_grouped(self, config: DictConfig, tracker: Tracker) -> None:
+        """Before the jobs start: train the sweep's trainings in groups where `learner.grouped` says
+        so (`hgm_repro.learner.grouped`); the jobs then find them FINISHED and only evaluate."""
+        from ..learner.grouped import use_grouped
+        from ..simulator.config import ConfigError
+        from .interrupts import JobInterrupted, hand_on, signals_raise
+        from .job import train_grouped
+
+        task = [str(o) for o in OmegaConf.to_container(config.hydra.overrides.task, resolve=False)]
+        # Expanding the sweep costs a compose per job: only when a job may group.
+        deciders = ("learner.grouped", "device", "learner", "experiment")
+        swept = any(o.split("=", 1)[0].lstrip("+~") in deciders for o in task)
+        try:
+            if not swept and not use_grouped(config.learner.grouped, str(config.device)):
+                log.info("learner.grouped=%s on %s: each job trains its own model (solo)", config.learner.grouped,
+                         config.device)
+                return
+        except (ValueError, ConfigError):
+            return  # a bad value: the jobs report it
+        jobs = [job for job in _sweep_jobs(config) if job.model.learned]
+        grouped = [job for job in jobs if use_grouped(job.learner.grouped, job.device)]
+        if jobs:
+            log.info("learner.grouped=%s on %s: %s", jobs[0].learner.grouped, jobs[0].device,
+                     "training the seeds of each model together before the jobs" if grouped
+                     else "each job trains its own model (solo)")
+        if not grouped:
+            return
+        try:
+            with signals_raise():
+                trained = train_grouped(grouped, tracker, self._parent)
+        except JobInterrupted as interrupted:
+            log.error("grouped training interrupted (%s); the same command resumes every member", interrupted)
+            self._close("KILLED")
+            hand_on(interrupted)
+        log.info("grouped training done: %d trainings; the jobs evaluate them", len(trained))
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         if self._tracker is not None and self._parent is not None:

@@ -29,8 +29,12 @@ KEY_LENGTH = 12
 # and `torch_threads` are execution strategies like `device`.
 NON_TRAINING_LEARNER_KEYS = frozenset(
     {"test_steps", "test_envs", "log_every", "checkpoint_every", "compile", "cuda_graph",
-     "checkpoint_buffer_max_mb", "torch_threads", "eval_every", "val_envs", "val_episodes"}
+     "checkpoint_buffer_max_mb", "torch_threads", "eval_every", "val_envs", "val_episodes",
+     "grouped"}
 )
+# Learner values added after trainings were stored, at the value that trains as before: left out
+# of the key at that value, so that existing trainings keep their keys.
+LEARNER_KEYS_ADDED_LATER = {"update_dtype": "float32"}
 # Model values that name or describe the model without changing its training.
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
 
@@ -46,7 +50,8 @@ def training_config(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str
     else:
         root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
     model = root["model"]
-    learner = {k: v for k, v in root["learner"].items() if k not in NON_TRAINING_LEARNER_KEYS}
+    learner = {k: v for k, v in root["learner"].items() if k not in NON_TRAINING_LEARNER_KEYS
+               and LEARNER_KEYS_ADDED_LATER.get(k, object()) != v}
     return {
         "version": TRAIN_KEY_VERSION,
         "model": {k: model[k] for k in MODEL_KEYS_IN_KEY if k in model},
@@ -66,6 +71,7 @@ def train_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
 
 # Root keys that say where results go or whether to train again, not what an evaluation measures.
 NON_EVALUATION_KEYS = frozenset({"tracking", "force_retrain", "hydra"})
+NON_EVALUATION_LEARNER_KEYS = frozenset({"grouped"})
 
 
 def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
@@ -79,5 +85,10 @@ def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     else:
         root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
     payload = {k: v for k, v in root.items() if k not in NON_EVALUATION_KEYS}
+    if isinstance(payload.get("learner"), Mapping):
+        # How the training was scheduled is not what an evaluation measures: a grouped sweep finds
+        # the evaluations of a solo one (and those of stores written before the setting existed).
+        payload["learner"] = {k: v for k, v in payload["learner"].items() if k not in NON_EVALUATION_LEARNER_KEYS
+                              and LEARNER_KEYS_ADDED_LATER.get(k, object()) != v}
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]

@@ -81,8 +81,11 @@ def make_update(learner: LearnerSchema, loss_module: DQNLoss, optimizer: torch.o
     max_grad_norm = learner.max_grad_norm
     params = list(loss_module.parameters())
 
+    bf16 = learner.update_dtype == "bfloat16" and device.type == "cuda"
+
     def update(batch: TensorDictBase) -> TensorDict:
-        loss = loss_module(batch)["loss"]
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+            loss = loss_module(batch)["loss"].float()
         optimizer.zero_grad(set_to_none=False)
         loss.backward()
         grad_norm = torch.nn.utils.clip_grad_norm_(params, max_grad_norm)

@@ -6,6 +6,7 @@ decision (5 by default). Works on any torch device: keep the state and the actio
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
@@ -58,18 +59,33 @@ def episode_metrics(state: TrafficState) -> dict[str, torch.Tensor]:
 
 
 class HighwaySimulator:
-    """Holds the parameters, the random generator and the state of `n_envs` envs."""
+    """Holds the parameters, the random generators and the state of `n_envs` envs.
+
+    `seed` is one seed, or one seed per training member of a group (`hgm_repro.learner.grouped`):
+    then the envs form len(seed) contiguous blocks of n_envs / len(seed), and each block draws its
+    traffic from its own generator only, so that a member's traffic is the same alone or in any group.
+    """
 
     def __init__(self, config: SimulatorConfig, scenario: ScenarioConfig, n_envs: int,
-                 device: torch.device | str = "cpu", seed: int = 0):
+                 device: torch.device | str = "cpu", seed: int | Sequence[int] = 0):
         if not isinstance(n_envs, int) or n_envs < 1:
             raise ValueError(f"n_envs={n_envs!r} is not allowed: need a whole number >= 1")
+        seeds = [int(seed)] if isinstance(seed, int) else [int(s) for s in seed]
+        if not seeds or n_envs % len(seeds):
+            raise ValueError(f"seed={list(seeds)!r} is not allowed with n_envs={n_envs}: need one seed, or one seed "
+                             f"per member with n_envs a multiple of their number")
         self.config = config
         self.scenario = scenario
         self.n_envs = n_envs
         self.device = torch.device(device)
-        self.generator = torch.Generator(device=self.device)
-        self.generator.manual_seed(int(seed))
+        self.member_envs = n_envs // len(seeds)
+        self.generators = []
+        for member_seed in seeds:
+            generator = torch.Generator(device=self.device)
+            generator.manual_seed(member_seed)
+            self.generators.append(generator)
+        # A solo simulator's one generator, under the name checkpoints and seeding use.
+        self.generator = self.generators[0]
         self.host_safety_layer = config.host_safety_layer
         # Switched off only to script situations by hand (tests, figures): vehicles that leave the
         # window or crash then stay away instead of coming back at the far edge.
@@ -103,19 +119,44 @@ class HighwaySimulator:
         self.spawn_cdf[-1] = 1.0  # guard against rounding: every u in [0, 1) finds a type
         self.lane_centres = (torch.arange(c.lanes, device=d, dtype=torch.float32) + 0.5) * c.lane_width
 
-    def _rand(self, *shape: int) -> torch.Tensor:
-        return torch.rand(*shape, generator=self.generator, device=self.device)
+    @property
+    def n_members(self) -> int:
+        return len(self.generators)
 
-    def _draw_types(self, *shape: int) -> torch.Tensor:
+    def _rand(self, *shape: int, live: Sequence[bool] | None = None) -> torch.Tensor:
+        """Uniform draws whose first dimension runs over the envs: each member's block of envs from
+        its own generator. Members not `live` draw nothing (their rows are zeros and go unused), as a
+        solo simulator returns early without drawing."""
+        if self.n_members == 1 and live is None:
+            return torch.rand(*shape, generator=self.generator, device=self.device)
+        return self._rand_rows([self.member_envs if live is None or live[k] else 0 for k in range(self.n_members)],
+                               *shape[1:], fill=[self.member_envs] * self.n_members)
+
+    def _rand_rows(self, counts: Sequence[int], *rest: int, fill: Sequence[int] | None = None) -> torch.Tensor:
+        """counts[k] rows drawn from member k's generator, concatenated in member order (padded with
+        zero rows up to fill[k])."""
+        parts = []
+        for k, generator in enumerate(self.generators):
+            parts.append(torch.rand(counts[k], *rest, generator=generator, device=self.device))
+            if fill is not None and fill[k] > counts[k]:
+                parts.append(torch.zeros(fill[k] - counts[k], *rest, device=self.device))
+        return parts[0] if len(parts) == 1 else torch.cat(parts)
+
+    def _member_any(self, mask: torch.Tensor) -> list[bool]:
+        """Per member: whether any of its envs has a True in `mask` ([N, ...])."""
+        return mask.reshape(self.n_members, -1).any(1).tolist()
+
+    def _draw_types(self, *shape: int, live: Sequence[bool] | None = None) -> torch.Tensor:
         # Inverse-CDF sampling: much cheaper than torch.multinomial for many small draws.
-        u = self._rand(*shape)
+        u = self._rand(*shape, live=live)
         return torch.searchsorted(self.spawn_cdf, u.reshape(-1), right=True).clamp(max=len(self.spawn_cdf) - 1) \
             .reshape(*shape)
 
-    def _draw_colors(self, *shape: int) -> torch.Tensor:
+    def _draw_colors(self, *shape: int, live: Sequence[bool] | None = None,
+                     counts: Sequence[int] | None = None) -> torch.Tensor:
         # Bright, saturated colours drawn independently of the type, so that pixels never tell
-        # a connected vehicle from a human-driven one.
-        hue = self._rand(*shape)
+        # a connected vehicle from a human-driven one. `counts`: rows per member (see _rand_rows).
+        hue = self._rand(*shape, live=live) if counts is None else self._rand_rows(counts, *shape[1:])
         k = (torch.arange(3, device=self.device) / 3.0)
         rgb = 0.5 + 0.5 * torch.cos(2 * torch.pi * (hue.unsqueeze(-1) + k))
         return (40 + 200 * rgb).to(torch.uint8)
@@ -123,12 +164,17 @@ class HighwaySimulator:
     def _initial_state(self, mask: torch.Tensor, old: TrafficState | None) -> TrafficState:
         """A fresh episode for envs where `mask` is True (others copied from `old`)."""
         c, d, n = self.config, self.device, self.n_envs
+        # A member none of whose envs resets draws nothing, so that its traffic never depends on
+        # when the other members' episodes end.
+        live = None if old is None else self._member_any(mask)
+        if live is not None and not any(live):
+            return old
         per_lane, lanes = c.vehicles_per_lane, c.lanes
         span = c.window_behind + c.window_ahead
         spacing = span / per_lane
         # Vehicles start on a jittered grid: every lane evenly filled, no overlap by construction.
         base = -c.window_behind + (torch.arange(per_lane, device=d) + 0.5) * spacing
-        jitter = (self._rand(n, lanes, per_lane) * 2 - 1) * 0.2 * spacing
+        jitter = (self._rand(n, lanes, per_lane, live=live) * 2 - 1) * 0.2 * spacing
         pos_lon = (base.view(1, 1, -1) + jitter).reshape(n, lanes * per_lane)
         lane = torch.arange(lanes, device=d).repeat_interleave(per_lane).expand(n, -1).clone()
         # The grid slot nearest the origin in the host's start lane becomes the host, moved to slot 0.
@@ -137,16 +183,16 @@ class HighwaySimulator:
         perm[0], perm[host_slot] = host_slot, 0
         pos_lon, lane = pos_lon[:, perm], lane[:, perm]
         pos_lon[:, HOST] = 0.0
-        vtype = self._draw_types(n, lanes * per_lane)
+        vtype = self._draw_types(n, lanes * per_lane, live=live)
         vtype[:, HOST] = 0
-        speed = c.v_min + self._rand(n, lanes * per_lane) * (c.v_max - c.v_min)
+        speed = c.v_min + self._rand(n, lanes * per_lane, live=live) * (c.v_max - c.v_min)
         speed[:, HOST] = c.host_start_speed_kmh / 3.6
         m = lanes * per_lane
         zeros_f = torch.zeros(n, device=d)
         fresh = TrafficState(
             pos_lon=pos_lon, pos_lat=self.lane_centres[lane], speed=speed, cruise=speed.clone(), target_lane=lane,
             vtype=vtype,
-            active=torch.ones(n, m, dtype=torch.bool, device=d), color=self._draw_colors(n, m),
+            active=torch.ones(n, m, dtype=torch.bool, device=d), color=self._draw_colors(n, m, live=live),
             was_ahead=pos_lon > 0, passed=torch.zeros(n, m, dtype=torch.bool, device=d),
             decision=torch.zeros(n, dtype=torch.long, device=d),
             ep_speed_sum=zeros_f.clone(), ep_lane_changes=zeros_f.clone(), ep_overtakes=zeros_f.clone(),
@@ -386,7 +432,10 @@ class HighwaySimulator:
         drawn among those with room in the spawn band; where no lane has room it waits."""
         c, s, d = self.config, self.state, self.device
         n, m = s.pos_lon.shape
-        if not bool(candidates.any()):
+        # Whether a member draws must depend on its own envs only: a solo simulator returns early
+        # without drawing, so a member of a group skips its draws in the same places.
+        live = self._member_any(candidates)
+        if not any(live):
             return
         candidates = candidates.clone()
         half_len = self.half_len_by_type[s.vtype]
@@ -405,8 +454,8 @@ class HighwaySimulator:
             slot = torch.where(candidates, slot_idx, m).amin(1)
             has = slot < m
             slot = slot.clamp(max=m - 1)
-            new_type = self._draw_types(n)
-            new_speed = c.v_min + self._rand(n) * (c.v_max - c.v_min)
+            new_type = self._draw_types(n, live=live)
+            new_speed = c.v_min + self._rand(n, live=live) * (c.v_max - c.v_min)
             hl_new = self.half_len_by_type[new_type].unsqueeze(1)
             # The newcomer never closes in on its neighbour: ahead of the field it drives at least
             # as fast as the vehicle behind it, behind the field at most as fast as the one ahead.
@@ -419,14 +468,15 @@ class HighwaySimulator:
             else:
                 spot = torch.where(empty, inner, torch.minimum(inner, near_pos - need))
                 free = spot >= edge - SPAWN_ZONE + 5.0
-            score = torch.where(free, self._rand(n, c.lanes), -1.0)
+            score = torch.where(free, self._rand(n, c.lanes, live=live), -1.0)
             lane = score.argmax(1, keepdim=True)
             spawn_pos = spot.gather(1, lane).squeeze(1)
             new_speed = torch.where(empty.gather(1, lane), new_speed.unsqueeze(1),
                                     lane_speed.gather(1, lane)).squeeze(1)
             lane = lane.squeeze(1)
             ok = has & free.any(1)
-            if not bool(ok.any()):
+            live = [was and now for was, now in zip(live, self._member_any(ok), strict=True)]
+            if not any(live):
                 return
             rows = torch.nonzero(ok).squeeze(1)
             cols, lanes = slot[rows], lane[rows]
@@ -437,7 +487,9 @@ class HighwaySimulator:
             s.target_lane[rows, cols] = lanes
             s.vtype[rows, cols] = new_type[rows]
             s.active[rows, cols] = True
-            s.color[rows, cols] = self._draw_colors(rows.numel())
+            counts = [rows.numel()] if self.n_members == 1 else \
+                torch.bincount(rows // self.member_envs, minlength=self.n_members).tolist()
+            s.color[rows, cols] = self._draw_colors(rows.numel(), counts=counts)
             s.was_ahead[rows, cols] = front
             s.passed[rows, cols] = False
             candidates[rows, cols] = False
