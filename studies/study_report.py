@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
-from learner_study import ARMS, ROOT  # noqa: E402
+from learner_study import ARMS, BEST, ROOT  # noqa: E402
 from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
@@ -76,6 +76,9 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                 continue
             seed = int(tags["seed"])
             if tags.get("stage") == "eval":
+                # A test of the best validation checkpoint (learner_study.py --also-best) is its own row.
+                if r.data.params.get("eval.checkpoint") == "best":
+                    arm = f"{arm}@best"
                 results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
             elif tags.get("stage") == "train":
                 for m in CURVES:
@@ -92,14 +95,16 @@ def report(stores: list[Path], out: Path) -> None:
     results.to_csv(out / "learner_study_per_seed.csv", index=False)
     rows = []
     for arm, grp in results.groupby("arm", sort=False):
-        overrides = f"model={arm}" if arm in REFERENCE_HOSTS else " ".join(ARMS[arm])
+        name, _, best = arm.partition("@")
+        overrides = f"model={arm}" if arm in REFERENCE_HOSTS else " ".join(ARMS[name] + (BEST if best else []))
         row = {"arm": arm, "overrides": overrides, "seeds": len(grp)}
         for m in RESULTS:
             est = mean_ci(grp[m].to_numpy(dtype=float))
             row[m] = est.point
             row[f"{m}_lo"], row[f"{m}_hi"] = est.low, est.high
         rows.append(row)
-    order = [a for a in (*ARMS, *REFERENCE_HOSTS) if a in set(results["arm"])]
+    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best")], *REFERENCE_HOSTS)
+             if a in set(results["arm"])]
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
 

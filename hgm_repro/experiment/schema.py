@@ -81,6 +81,7 @@ class LearnerSchema:
     val_episodes: int = field(default=1, metadata=ge(1))
     n_step: int = field(default=1, metadata=ge(1))
     reward_scale: float = field(default=1.0, metadata=gt(0))
+    collision_weight: float = field(default=1.0, metadata=gt(0))
     loss_function: Literal["l2", "l1", "smooth_l1"] = "l2"
     checkpoint_buffer_max_mb: float = field(default=256.0, metadata=ge(0))
     torch_threads: int = field(default=0, metadata=ge(0))

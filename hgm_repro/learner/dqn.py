@@ -40,6 +40,7 @@ from .builders import (
     make_update,
 )
 from .n_step import NStepReturns
+from .training_reward import training_reward
 
 Log = Callable[[dict[str, float], int], None]
 logger = logging.getLogger(__name__)
@@ -130,7 +131,7 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     beta_schedule = LinearScheduler(buffer, "beta", final_value=L.per_beta_end, num_steps=n_batches)
     update = make_update(L, loss_module, optimizer, device)
     n_step = NStepReturns(L.n_step, L.gamma)
-    reward_scale = L.reward_scale
+    reward_scale, collision_weight = L.reward_scale, L.collision_weight
 
     updates_done, update_credit = 0, 0.0
     eval_every = L.eval_every
@@ -217,8 +218,8 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         beta_schedule.step()
         transitions = batch.exclude("collector", "episode", "reward_terms", ("next", "episode"),
                                     ("next", "reward_terms"))
-        if reward_scale != 1.0:
-            transitions.set(("next", "reward"), transitions.get(("next", "reward")) * reward_scale)
+        if reward_scale != 1.0 or collision_weight != 1.0:
+            transitions.set(("next", "reward"), training_reward(batch, reward_scale, collision_weight))
         transitions = n_step(transitions)  # n-step windows complete n - 1 decisions later
         if transitions is not None and transitions.numel() > 0:
             buffer.extend(transitions.reshape(-1))

@@ -49,6 +49,7 @@ from ..simulator import N_ACTIONS
 from .builders import make_actor, make_exploration, make_loss, make_network, make_replay_buffer
 from .dqn import VAL_SEED_OFFSET, NonFiniteLossError, _buffer_megabytes, _rng_state, _set_rng_state
 from .n_step import NStepReturns
+from .training_reward import training_reward
 
 Log = Callable[[dict[str, float], int], None]
 logger = logging.getLogger(__name__)
@@ -382,8 +383,8 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
             p["exploration"].step(n_envs)
             p["beta"].step()
             member_steps = transitions[rows]
-            if L.reward_scale != 1.0:
-                member_steps.set(("next", "reward"), member_steps.get(("next", "reward")) * L.reward_scale)
+            if L.reward_scale != 1.0 or L.collision_weight != 1.0:
+                member_steps.set(("next", "reward"), training_reward(step[rows], L.reward_scale, L.collision_weight))
             windows = p["n_step"](member_steps.reshape(n_envs, 1))
             if windows is not None and windows.numel() > 0:
                 p["buffer"].extend(windows.reshape(-1))
