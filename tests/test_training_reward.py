@@ -45,3 +45,19 @@ def test_non_positive_collision_weight_is_refused(bad):
 
     with pytest.raises(ConfigError, match="collision_weight"):
         validate(compose_cfg(bad))
+
+
+@pytest.mark.parametrize("grouped", [False, True], ids=["solo", "grouped"])
+def test_training_with_a_weighted_crash_runs_to_the_end(tmp_path, grouped):
+    from hgm_repro.experiment.checkpoint import load_checkpoint
+    from hgm_repro.learner import train
+    from hgm_repro.learner.grouped import train_group
+
+    from .test_learner import compose_job
+
+    jobs = [compose_job("learner.collision_weight=5", f"seed={s}") for s in (0, 1)]
+    if grouped:
+        finals = train_group(jobs, [tmp_path / "a", tmp_path / "b"], [lambda m, s: None] * 2)
+    else:
+        finals = [train(jobs[0], tmp_path / "a", lambda m, s: None)]
+    assert all(load_checkpoint(f)["env_steps"] == 128 for f in finals)
