@@ -260,42 +260,75 @@ def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, 
                 torch_threads=used)
 
 
-def bench_grouped_training(device: torch.device, total_steps: int, members: int, grouped: bool,
-                           threads: int) -> dict[str, Any]:
-    """Aggregate training speed of `members` seeds with the quick preset, end to end: trained as one
-    group (`hgm_repro.learner.grouped`, one vmapped update) or solo one after another, on `threads`
-    torch threads. `env_steps_per_s` and `updates_per_s` are summed over the members."""
-    import tempfile
+GROUPED_PATHS = ("grouped", "sequential", "parallel")
+
+
+def _member_job(device: torch.device, total_steps: int, seed: int, threads: int) -> Any:
+    """One training member of the grouped-training lines: the quick preset, no validation, no logs."""
+    n_envs = 16 if device.type == "cpu" else 64
+    return _compose("experiment=quick", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
+                    f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
+                    f"learner.torch_threads={threads}", "learner.eval_every=0",
+                    f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+
+
+def _train_member(device: str, total_steps: int, seed: int, threads: int, directory: str) -> tuple[int, int]:
+    """Train one member alone (in whichever process calls it); its (env steps, updates)."""
     from pathlib import Path
 
     from .experiment.checkpoint import load_checkpoint
     from .learner import train
+
+    job = _member_job(torch.device(device), total_steps, seed, threads)
+    final = load_checkpoint(train(job, Path(directory), lambda metrics, step: None))
+    return int(final["env_steps"]), int(final["updates"])
+
+
+def bench_grouped_training(device: torch.device, total_steps: int, members: int, path: str,
+                           threads: int) -> dict[str, Any]:
+    """Aggregate training speed of `members` seeds with the quick preset, end to end, by one of three
+    paths: `grouped` (one process, one vmapped update over the members, `threads` torch threads),
+    `sequential` (one process, the members one after another on `threads` threads) or `parallel`
+    (one solo job per core at once, one thread each: what a joblib sweep of solo jobs does).
+    `env_steps_per_s` and `updates_per_s` are summed over the members."""
+    import tempfile
+    from concurrent.futures import ProcessPoolExecutor
+    from multiprocessing import get_context
+    from pathlib import Path
+
+    from .experiment.checkpoint import load_checkpoint
     from .learner.grouped import train_group
 
-    n_envs = 16 if device.type == "cpu" else 64
-    jobs = [_compose("experiment=quick", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
-                     f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
-                     f"learner.torch_threads={threads}", "learner.eval_every=0",
-                     f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
-            for seed in range(members)]
+    if path not in GROUPED_PATHS:
+        raise ValueError(f"path={path!r} is not one of {GROUPED_PATHS}")
+    jobs = [_member_job(device, total_steps, seed, threads) for seed in range(members)]
     before = torch.get_num_threads()
+    processes = 1
     with tempfile.TemporaryDirectory() as tmp:
         dirs = [Path(tmp) / f"member{k}" for k in range(members)]
         start = time.perf_counter()
-        if grouped:
-            finals = train_group(jobs, dirs, [lambda metrics, step: None] * members)
+        if path == "grouped":
+            finals = [load_checkpoint(f) for f in train_group(jobs, dirs, [lambda metrics, step: None] * members)]
+            counts = [(int(f["env_steps"]), int(f["updates"])) for f in finals]
+        elif path == "sequential":
+            counts = [_train_member(str(device), total_steps, seed, threads, str(d)) for seed, d in enumerate(dirs)]
         else:
-            finals = [train(job, d, lambda metrics, step: None) for job, d in zip(jobs, dirs, strict=True)]
+            # Fresh interpreters (spawn): a forked child would inherit this process's torch threads.
+            processes = min(members, threads)
+            with ProcessPoolExecutor(processes, mp_context=get_context("spawn")) as pool:
+                counts = list(pool.map(_train_member, [str(device)] * members, [total_steps] * members,
+                                       range(members), [1] * members, [str(d) for d in dirs]))
         _sync(device)
         elapsed = time.perf_counter() - start
-        updates = sum(int(load_checkpoint(f)["updates"]) for f in finals)
-        steps = sum(int(load_checkpoint(f)["env_steps"]) for f in finals)
     torch.set_num_threads(before)
+    steps, updates = sum(c[0] for c in counts), sum(c[1] for c in counts)
+    label = {"grouped": "grouped", "sequential": "solo, one after another",
+             "parallel": f"solo, {processes} jobs at once"}[path]
     return dict(what="learner training, members (quick preset, end to end)", device=str(device), members=members,
-                path="grouped" if grouped else "solo, one after another", n_envs=n_envs * members, camera="front",
-                hgm="paper", image=f"{jobs[0].observation.height}x{jobs[0].observation.width}",
+                path=label, n_envs=jobs[0].learner.n_envs * members, camera="front", hgm="paper",
+                image=f"{jobs[0].observation.height}x{jobs[0].observation.width}",
                 env_steps_per_s=round(steps / elapsed, 1), updates_per_s=round(updates / elapsed, 2),
-                torch_threads=threads)
+                torch_threads=1 if path == "parallel" else threads, processes=processes)
 
 
 def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[str, Any] | None:
@@ -401,13 +434,15 @@ def main(argv: list[str] | None = None) -> int:
             steps = (args.grouped_steps or args.train_steps) * (8 if gpu else 1)
             # The acceptance line: one member alone on one thread, the baseline the rest compare to.
             print(f"learner training, one member solo on one thread, on {device}...", file=sys.stderr)
-            alone = bench_grouped_training(device, steps, 1, grouped=False, threads=1)
+            alone = bench_grouped_training(device, steps, 1, "sequential", threads=1)
             emit(alone)
             for members in [int(x) for x in args.members.split(",") if x]:
-                for grouped in (False, True):
-                    print(f"learner training, {members} members {'grouped' if grouped else 'solo'} on {device}...",
-                          file=sys.stderr)
-                    row = bench_grouped_training(device, steps, members, grouped=grouped, threads=cores)
+                # Solo jobs side by side compete for the cores only on a CPU; on a GPU they would
+                # share one device, which the grouped path exists to do better.
+                paths = ("sequential", "grouped", *(("parallel",) if not gpu and members > 1 and cores > 1 else ()))
+                for path in paths:
+                    print(f"learner training, {members} members {path} on {device}...", file=sys.stderr)
+                    row = bench_grouped_training(device, steps, members, path, threads=cores)
                     row["vs_one_member_one_thread"] = round(row["env_steps_per_s"] / alone["env_steps_per_s"], 3)
                     emit(row)
     if "highway" in parts:
