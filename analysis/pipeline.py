@@ -17,6 +17,7 @@ from analysis.discussion import discussion
 from analysis.figures import TRAINING_FIGURES, make_figures
 from analysis.labels import LEARNED, REFERENCE_HOSTS, SCENARIOS, model_label, ordered_models
 from analysis.load import EVAL_METRICS, StoreData
+from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import ReportInputs, fmt_estimate, write_report
 from analysis.stats import mean_ci
@@ -187,5 +188,8 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         git_dirty=data.git_dirty,
         train_keys=sorted(str(k) for k in data.runs["train_key"].dropna().unique()),
     )
+    markdown = out_dir / "results.md"
+    markdown.write_text(results_markdown(summary, results, data.configs, evals, data.git_commits, figures, out_dir))
+    csvs.append(markdown)
     report = write_report(inputs, out_dir / "report.pdf")
     return Outputs(report=report, figures=figures, csvs=csvs)

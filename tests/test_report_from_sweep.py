@@ -55,6 +55,14 @@ def test_report_from_a_real_smoke_sweep(swept: Path, store_report: Path) -> None
     for name in ("fig5_speed", "fig_test_results"):
         assert image_variance(out / f"{name}.png") > 0
     assert "1 seed" in text  # one seed: the report says there is no interval instead of inventing one
+    # results.md: Table 6 beside the paper's numbers, the side metrics, each claim with its verdict.
+    markdown = (out / "results.md").read_text()
+    for needed in ("(paper 1927)", "(paper 1969)", "| Human |", "## Collisions per episode", "preset `smoke`",
+                   "![Fig. 5: training speed](fig5_speed.png)"):
+        assert needed in markdown, needed
+    claim_rows = [line for line in markdown.splitlines() if line.startswith("| ") and "**" in line]
+    assert [row.split(" | ")[0] for row in claim_rows] == [f"| {n}" for n in range(1, 8)]
+    assert "**inconclusive**" in markdown  # one seed cannot decide a claim
 
 
 def test_report_from_a_bundle_of_the_real_sweep(swept: Path, store_report: Path) -> None:
@@ -70,7 +78,7 @@ def test_report_from_a_bundle_of_the_real_sweep(swept: Path, store_report: Path)
     assert {p.name for p in bundle.iterdir()} >= {name for name, _ in TABLE_FILES.values()}
     assert (out / "report.pdf").stat().st_size > 50_000
     # Table 6 with its CIs, the claims and every word of the report are those the store gave.
-    for table in ("test_summary.csv", "claims.csv"):
+    for table in ("test_summary.csv", "claims.csv", "results.md"):
         assert (out / table).read_text() == (store_report / table).read_text(), table
     assert "episode_return" in (out / "test_summary.csv").read_text()
 

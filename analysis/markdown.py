@@ -1,0 +1,97 @@
+"""results.md: the test table beside the paper's Table 6, the safety numbers beside it, and the
+verdict on each claim, as Markdown for the README and docs/results/ (report.pdf holds the rest:
+curves, configs, every metric)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+import yaml
+
+from analysis.claims import ClaimResult
+from analysis.labels import METRIC_LABELS, fmt, model_label, ordered_models
+from analysis.tables import PAPER_TABLE6
+
+# The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
+SIDE_METRICS = ("collisions", "avg_speed_kmh", "dangerous_actions")
+FIGURES = (("fig5_speed", "Fig. 5: training speed"), ("fig6_lane_changes", "Fig. 6: training lane changes"),
+           ("fig7_overtakes", "Fig. 7: training overtakes"), ("fig_test_results", "Test results per scenario"))
+
+
+def _cell(row: pd.Series | None, metric: str) -> str:
+    if row is None or row["n_seeds"] == 0 or np.isnan(row["mean"]):
+        return "-"
+    if row["n_seeds"] < 2 or np.isnan(row["low"]):
+        return f"{fmt(row['mean'], metric)} (1 seed)"
+    return f"{fmt(row['mean'], metric)} [{fmt(row['low'], metric)}, {fmt(row['high'], metric)}]"
+
+
+def _grid(summary: pd.DataFrame, metric: str, scenarios: list[str], paper: bool) -> list[str]:
+    part = summary[summary["metric"] == metric]
+    rows = {(r["model"], r["scenario"]): r for _, r in part.iterrows()}
+    head = ["Method", "Seeds", *[f"Scenario {s}" for s in scenarios]]
+    lines = ["| " + " | ".join(head) + " |", "|" + "---|" * 2 + "---:|" * len(scenarios)]
+    for model in ordered_models(part["model"]):
+        seeds = sorted({int(rows[(model, s)]["n_seeds"]) for s in scenarios if (model, s) in rows})
+        cells = []
+        for s in scenarios:
+            text = _cell(rows.get((model, s)), metric)
+            if paper and model in PAPER_TABLE6.index and s in PAPER_TABLE6.columns:
+                text += f" (paper {PAPER_TABLE6.loc[model, s]})"
+            cells.append(text)
+        seed_text = "/".join(map(str, seeds)) or "0"
+        lines.append(f"| {model_label(model, short=True)} | {seed_text} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def scale_text(configs: dict[str, str], evals: pd.DataFrame) -> str:
+    """The scale the numbers were made at, read from the runs' own resolved configs."""
+    text = configs.get("proposed") or next(iter(configs.values()), "")
+    try:
+        config: dict[str, Any] = yaml.safe_load(text) or {}
+    except yaml.YAMLError:
+        config = {}
+    learner, obs = config.get("learner", {}), config.get("observation", {})
+    parts = []
+    if learner:
+        parts.append(f"preset `{config.get('experiment', {}).get('name', '?')}`: {learner.get('total_steps', 0):,} "
+                     f"training steps per seed (paper 1,000,000), images {obs.get('height')}x{obs.get('width')} "
+                     f"with {obs.get('frame_stack')} frames (paper 84x84, 4)")
+        parts.append(f"tested with the `{config.get('eval', {}).get('checkpoint', 'final')}` checkpoint")
+    if "n_episodes" in evals and not evals.empty:
+        episodes = sorted({int(n) for n in evals["n_episodes"].dropna()})
+        parts.append(f"{'/'.join(map(str, episodes))} complete test episodes per cell (paper: 200,000 decisions, "
+                     "about 834 episodes)")
+    return "; ".join(parts) + "." if parts else "scale unknown: the runs logged no config."
+
+
+def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
+                     evals: pd.DataFrame, commits: list[str], figures: dict[str, Path], out_dir: Path) -> str:
+    """The Markdown text; figure links are relative to `out_dir`, where results.md is written."""
+    scenarios = [s for s in ("1", "2", "3", "4", "5") if s in set(summary["scenario"])] \
+        or sorted(set(summary["scenario"]))
+    lines = ["# Results", "", f"Scale: {scale_text(configs, evals)}",
+             f"Runs from commit{'s' if len(commits) != 1 else ''} {', '.join(c[:10] for c in commits) or 'unknown'}. "
+             "Cells: mean over seeds [95% bootstrap CI over seeds].", "",
+             "## Test return per episode (the paper's Table 6; its numbers in parentheses)", "",
+             *_grid(summary, "episode_return", scenarios, paper=True), "",
+             "The paper does not say what its test score sums; ours is the mean return of a complete "
+             "240-decision episode under Table 2's rewards, so only the order of the methods compares.", ""]
+    for metric in SIDE_METRICS:
+        if metric in set(summary["metric"]):
+            lines += [f"## {METRIC_LABELS[metric]}", "",
+                      *_grid(summary, metric, scenarios, paper=False), ""]
+    lines += ["## The paper's claims", "", "| # | Claim | Verdict | Evidence |", "|---|---|---|---|"]
+    for claim in claims:
+        evidence = "; ".join(c.text() for c in claim.comparisons).replace("|", "/")
+        lines.append(f"| {claim.number} | {claim.statement} | **{claim.verdict}** | {evidence} |")
+    shown = [(name, label) for name, label in FIGURES if name in figures]
+    if shown:
+        lines += ["", "## Figures", ""]
+        for name, label in shown:
+            png = Path(figures[name]["png"]) if isinstance(figures[name], dict) else Path(figures[name])
+            lines += [f"![{label}]({png.relative_to(out_dir) if png.is_relative_to(out_dir) else png})", ""]
+    return "\n".join(lines).rstrip() + "\n"
