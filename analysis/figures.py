@@ -117,7 +117,8 @@ def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
         else:
             sns.pointplot(data=part, x="cv", y=metric, hue="model", hue_order=models,
                           palette={m: PALETTE.get(m, "black") for m in models}, errorbar=("ci", 95),
-                          n_boot=1000, seed=0, dodge=0.35, markersize=4, linewidth=1.3, capsize=0.08,
+                          n_boot=1000, seed=0, dodge=0.35 if len(models) > 1 else False,  # one method: no dodge
+                          markersize=4, linewidth=1.3, capsize=0.08,
                           native_scale=False, ax=ax, legend=False)
         ax.set_title(METRIC_LABELS.get(metric, metric), fontsize=10)
         ax.set_xlabel("CV ratio (scenario 1..5)")

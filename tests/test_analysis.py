@@ -140,3 +140,13 @@ def test_rerun_of_a_cell_is_not_counted_as_an_extra_seed(tmp_path: Path) -> None
     data = load_store(uri)
     assert len(data.evals) == 2
     assert any("duplicate" in note for note in data.dropped)
+
+
+def test_report_of_one_model_alone(tmp_path: Path) -> None:
+    # A grid published one model at a time has a single method at first: no hue to dodge.
+    spec = SyntheticSpec(seeds=(0, 1, 2), models=("proposed",), scenarios=("1", "2"), episodes=2)
+    uri = write_store(tmp_path / "store", spec, with_parent=False)
+    out = tmp_path / "reports"
+    assert main(["--tracking-uri", uri, "--out", str(out), "--no-pictures"]) == 0
+    assert image_variance(out / "fig_test_results.png") > 0
+    assert "| Proposed | 3 |" in (out / "results.md").read_text()
