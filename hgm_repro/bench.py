@@ -269,6 +269,7 @@ def _member_job(device: torch.device, total_steps: int, seed: int, threads: int)
     return _compose("experiment=quick", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
                     f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
                     f"learner.torch_threads={threads}", "learner.eval_every=0",
+                    "eval.checkpoint=final",  # no validation, so no best.pt for the preset's test to drive
                     f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
 
 

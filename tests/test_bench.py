@@ -53,3 +53,12 @@ def test_bench_grouped_training_lines_for_members_grouped_solo_and_parallel(caps
     for row in rows:
         assert REQUIRED <= set(row) and row["env_steps_per_s"] > 0 and row["updates_per_s"] > 0
     assert all("vs_one_member_one_thread" in r for r in rows[1:])
+
+
+def test_grouped_training_members_are_valid_jobs_of_the_current_preset():
+    # The members train without validation; the preset they start from must still accept that
+    # (the quick preset tests best.pt, which needs validation unless the member says otherwise).
+    from hgm_repro.bench import _member_job
+
+    job = _member_job(torch.device("cpu"), total_steps=64, seed=3, threads=1)
+    assert job.learner.eval_every == 0 and job.eval.checkpoint == "final" and job.seed == 3
