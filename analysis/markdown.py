@@ -7,26 +7,18 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 import yaml
 
 from analysis.claims import ClaimResult
-from analysis.labels import METRIC_LABELS, fmt, model_label, ordered_models
+from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
+from analysis.report import fmt_estimate
 from analysis.tables import PAPER_TABLE6
 
 # The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
 SIDE_METRICS = ("collisions", "avg_speed_kmh", "dangerous_actions")
 FIGURES = (("fig5_speed", "Fig. 5: training speed"), ("fig6_lane_changes", "Fig. 6: training lane changes"),
            ("fig7_overtakes", "Fig. 7: training overtakes"), ("fig_test_results", "Test results per scenario"))
-
-
-def _cell(row: pd.Series | None, metric: str) -> str:
-    if row is None or row["n_seeds"] == 0 or np.isnan(row["mean"]):
-        return "-"
-    if row["n_seeds"] < 2 or np.isnan(row["low"]):
-        return f"{fmt(row['mean'], metric)} (1 seed)"
-    return f"{fmt(row['mean'], metric)} [{fmt(row['low'], metric)}, {fmt(row['high'], metric)}]"
 
 
 def _grid(summary: pd.DataFrame, metric: str, scenarios: list[str], paper: bool) -> list[str]:
@@ -38,7 +30,9 @@ def _grid(summary: pd.DataFrame, metric: str, scenarios: list[str], paper: bool)
         seeds = sorted({int(rows[(model, s)]["n_seeds"]) for s in scenarios if (model, s) in rows})
         cells = []
         for s in scenarios:
-            text = _cell(rows.get((model, s)), metric)
+            row = rows.get((model, s))
+            text = "-" if row is None else fmt_estimate(row["mean"], row["low"], row["high"], int(row["n_seeds"]),
+                                                         metric)
             if paper and model in PAPER_TABLE6.index and s in PAPER_TABLE6.columns:
                 text += f" (paper {PAPER_TABLE6.loc[model, s]})"
             cells.append(text)
@@ -69,9 +63,10 @@ def scale_text(configs: dict[str, str], evals: pd.DataFrame) -> str:
 
 
 def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
-                     evals: pd.DataFrame, commits: list[str], figures: dict[str, Path], out_dir: Path) -> str:
+                     evals: pd.DataFrame, commits: list[str], figures: dict[str, dict[str, Path]],
+                     out_dir: Path) -> str:
     """The Markdown text; figure links are relative to `out_dir`, where results.md is written."""
-    scenarios = [s for s in ("1", "2", "3", "4", "5") if s in set(summary["scenario"])] \
+    scenarios = [s for s in SCENARIOS if s in set(summary["scenario"])] \
         or sorted(set(summary["scenario"]))
     lines = ["# Results", "", f"Scale: {scale_text(configs, evals)}",
              f"Runs from commit{'s' if len(commits) != 1 else ''} {', '.join(c[:10] for c in commits) or 'unknown'}. "
@@ -92,6 +87,5 @@ def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: 
     if shown:
         lines += ["", "## Figures", ""]
         for name, label in shown:
-            png = Path(figures[name]["png"]) if isinstance(figures[name], dict) else Path(figures[name])
-            lines += [f"![{label}]({png.relative_to(out_dir) if png.is_relative_to(out_dir) else png})", ""]
+            lines += [f"![{label}]({Path(figures[name]['png']).relative_to(out_dir)})", ""]
     return "\n".join(lines).rstrip() + "\n"
