@@ -8,9 +8,10 @@ import pandas as pd
 
 LEARNED = ("proposed", "min", "coordinate")
 # Drawn as horizontal lines on the training figures; idm_mobil_limits is the fair bar for a learned
-# host (the same rule inside the host's own limits, no safety layer).
+# host (the same rule inside the host's own limits, no safety layer). idm_limits (IDM alone inside
+# the same limits, the bar for a host that keeps its lane) is a study host, labelled when present.
 REFERENCE_HOSTS = ("human", "idm_mobil", "idm_mobil_limits")
-MODEL_ORDER = ("proposed", "min", "coordinate", "human", "idm_mobil", "idm_mobil_limits", "random")
+MODEL_ORDER = ("proposed", "min", "coordinate", "human", "idm_mobil", "idm_mobil_limits", "idm_limits", "random")
 MODEL_LABELS = {
     "proposed": "Proposed (HGM + camera)",
     "min": "Min (camera only)",
@@ -18,13 +19,15 @@ MODEL_LABELS = {
     "human": "Human-driven host",
     "idm_mobil": "IDM + MOBIL host",
     "idm_mobil_limits": "IDM + MOBIL inside the host's limits",
+    "idm_limits": "IDM lane keeping inside the host's limits",
     "random": "Random host",
 }
 SHORT_LABELS = {"proposed": "Proposed", "min": "Min", "coordinate": "Coordinate", "human": "Human",
                 "idm_mobil": "IDM+MOBIL",
-                "idm_mobil_limits": "IDM+MOBIL (host limits)", "random": "Random"}
+                "idm_mobil_limits": "IDM+MOBIL (host limits)", "idm_limits": "IDM (host limits)", "random": "Random"}
 PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "human": "#555555",
-           "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "random": "#b08d57"}
+           "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "idm_limits": "#c9a227",
+           "random": "#b08d57"}
 
 # Table 5: the connected-vehicle ratio of each test scenario.
 SCENARIOS = ("1", "2", "3", "4", "5")

@@ -53,12 +53,13 @@ class IdmMobilDriver:
     IDM gives the acceleration the host would like; above `accel_threshold` the host accelerates,
     below its negative it decelerates, otherwise it holds its speed. MOBIL changes lane when the
     host's gain plus `politeness` times the followers' gains beats `change_threshold`, and the new
-    follower would not have to brake harder than `safe_decel`. All parameters are SI units."""
+    follower would not have to brake harder than `safe_decel`. With `lane_changes=False` it only
+    follows (IDM in its lane). All parameters are SI units."""
 
     def __init__(self, *, desired_speed: float | None = None, time_headway: float = 1.5, min_gap: float = 2.0,
                  comfortable_decel: float = 2.0, delta: float = 4.0, accel_threshold: float = 0.3,
                  politeness: float = 0.2, change_threshold: float = 0.2, safe_decel: float = 4.0,
-                 safety_layer: bool = True):
+                 safety_layer: bool = True, lane_changes: bool = True):
         self.desired_speed = desired_speed  # None: the simulator's v_max
         self.time_headway = time_headway
         self.min_gap = min_gap
@@ -69,6 +70,7 @@ class IdmMobilDriver:
         self.change_threshold = change_threshold
         self.safe_decel = safe_decel
         self.safety_layer = safety_layer
+        self.lane_changes = lane_changes
 
     def idm(self, speed: torch.Tensor, lead_speed: torch.Tensor, gap: torch.Tensor, a_max: torch.Tensor,
             v0: float) -> torch.Tensor:
@@ -125,7 +127,7 @@ class IdmMobilDriver:
             new_follow_gain = new_follow_after - idm_of(new_follow, new_lead)
             gain = accel_there - accel_now + self.politeness * (new_follow_gain + old_follow_gain)
             safe = (new_follow_after >= -self.safe_decel) & (accel_there >= -self.safe_decel)
-            ok = exists & ~changing & safe & (gain > self.change_threshold) & (gain > best_gain)
+            ok = exists & ~changing & safe & (gain > self.change_threshold) & (gain > best_gain) & self.lane_changes
             best_gain = torch.where(ok, gain, best_gain)
             best_action = torch.where(ok, int(action), best_action)
 

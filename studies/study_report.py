@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
-from learner_study import ARMS, BEST, ROOT  # noqa: E402
+from learner_study import ARMS, BEST, ROOT, STUDY_REFERENCES  # noqa: E402
 from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
@@ -23,8 +23,6 @@ from analysis.stats import mean_ci  # noqa: E402
 # Training curves (with exploration) and the greedy validation return (no exploration, seeds no
 # test uses): the second shows when a host has learned, the first how it explored.
 CURVES = ("train/episode_return", "train/collisions", "train/avg_speed_kmh", "val/episode_return")
-# The reference hosts the study also tests on each tuning seed (no training, same traffic).
-REFERENCE_HOSTS = ("human", "idm_mobil_limits")
 RESULTS = ("episode_return", "collisions", "dangerous_actions", "avg_speed_kmh", "lane_changes", "overtakes")
 
 
@@ -71,13 +69,14 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
             if r.info.status != "FINISHED" or "seed" not in tags:
                 continue
             model = tags.get("model")
-            arm = model if model in REFERENCE_HOSTS else _arm_of(r.data.params, signatures)
-            if arm is None or model not in ("proposed", *REFERENCE_HOSTS):
+            arm = model if model in STUDY_REFERENCES else _arm_of(r.data.params, signatures)
+            if arm is None or model not in ("proposed", *STUDY_REFERENCES):
                 continue
             seed = int(tags["seed"])
             if tags.get("stage") == "eval":
-                # A test of the best validation checkpoint (learner_study.py --also-best) is its own row.
-                if r.data.params.get("eval.checkpoint") == "best":
+                # A test of the best validation checkpoint (learner_study.py --also-best) is its own row;
+                # a reference host has no checkpoint, whatever the preset names.
+                if arm not in STUDY_REFERENCES and r.data.params.get("eval.checkpoint") == "best":
                     arm = f"{arm}@best"
                 results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
             elif tags.get("stage") == "train":
@@ -96,14 +95,14 @@ def report(stores: list[Path], out: Path) -> None:
     rows = []
     for arm, grp in results.groupby("arm", sort=False):
         name, _, best = arm.partition("@")
-        overrides = f"model={arm}" if arm in REFERENCE_HOSTS else " ".join(ARMS[name] + (BEST if best else []))
+        overrides = f"model={arm}" if arm in STUDY_REFERENCES else " ".join(ARMS[name] + (BEST if best else []))
         row = {"arm": arm, "overrides": overrides, "seeds": len(grp)}
         for m in RESULTS:
             est = mean_ci(grp[m].to_numpy(dtype=float))
             row[m] = est.point
             row[f"{m}_lo"], row[f"{m}_hi"] = est.low, est.high
         rows.append(row)
-    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best")], *REFERENCE_HOSTS)
+    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best")], *STUDY_REFERENCES)
              if a in set(results["arm"])]
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
@@ -123,4 +122,33 @@ def report(stores: list[Path], out: Path) -> None:
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "learner_study_curves.png", dpi=110)
+    _validation_per_seed(results, curves, out / "learner_study_validation_per_seed.png")
     print(summary[["seeds", *RESULTS]].round(2).to_string())
+
+
+def _validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path) -> None:
+    """One panel per seed: each arm's greedy validation return against env steps, beside the
+    human-driven host's test return on that seed (the bar), so that one can read at what budget a
+    training reaches it. Validation and test draw different traffic (seeds + 200000 and + 100000),
+    so the line is a reference level, not the same episodes."""
+    val = curves[curves["metric"] == "val/episode_return"]
+    seeds = sorted(val["seed"].unique())
+    if not seeds:
+        return
+    fig, axes = plt.subplots(1, len(seeds), figsize=(4.2 * len(seeds), 3.6), sharey=True, squeeze=False)
+    for ax, seed in zip(axes[0], seeds, strict=True):
+        on_seed = val[val["seed"] == seed]
+        for arm in [a for a in ARMS if a in set(on_seed["arm"])]:
+            points = on_seed[on_seed["arm"] == arm].sort_values("step")
+            ax.plot(points["step"], points["value"], marker=".", color=f"C{list(ARMS).index(arm) % 10}", label=arm)
+        human = results[(results["arm"] == "human") & (results["seed"] == seed)]["episode_return"]
+        if len(human):
+            ax.axhline(float(human.iloc[0]), color="black", linestyle="--", linewidth=1,
+                       label="human-driven host (test)")
+        ax.set_title(f"seed {seed}")
+        ax.set_xlabel("env steps")
+    axes[0][0].set_ylabel("greedy validation return")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
