@@ -117,7 +117,8 @@ class IdmMobilDriver:
 
         best_gain = torch.full((n,), -INF, device=d)
         best_action = torch.full((n,), int(Action.NO_ACTION), device=d, dtype=torch.long)
-        for step, action in ((-1, Action.LANE_LEFT), (1, Action.LANE_RIGHT)):
+        # A lane keeper (lane_changes=False) skips MOBIL's evaluation altogether.
+        for step, action in ((-1, Action.LANE_LEFT), (1, Action.LANE_RIGHT)) if self.lane_changes else ():
             target = lane + step
             exists = (target >= 0) & (target < cfg.lanes)
             t = target.clamp(0, cfg.lanes - 1)[:, None]
@@ -127,7 +128,7 @@ class IdmMobilDriver:
             new_follow_gain = new_follow_after - idm_of(new_follow, new_lead)
             gain = accel_there - accel_now + self.politeness * (new_follow_gain + old_follow_gain)
             safe = (new_follow_after >= -self.safe_decel) & (accel_there >= -self.safe_decel)
-            ok = exists & ~changing & safe & (gain > self.change_threshold) & (gain > best_gain) & self.lane_changes
+            ok = exists & ~changing & safe & (gain > self.change_threshold) & (gain > best_gain)
             best_gain = torch.where(ok, gain, best_gain)
             best_action = torch.where(ok, int(action), best_action)
 

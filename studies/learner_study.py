@@ -89,7 +89,7 @@ ARMS: dict[str, list[str]] = {
 
 
 # The reference hosts the study tests on each tuning seed (no training, the same traffic): the bar
-# (the human-driven host) and the fair rule inside the host's own limits.
+# (the human-driven host), the fair rule inside the host's own limits, and its lane-keeping half.
 STUDY_REFERENCES = ("human", "idm_mobil_limits", "idm_limits")
 
 

@@ -105,25 +105,23 @@ def test_idm_mobil_beats_the_human_host_in_training_traffic(one_thread):
     assert idm["dangerous_actions_per_episode"] <= human["dangerous_actions_per_episode"]
 
 
+def _lane_change_signals(driver, decisions: int = 40, n_envs: int = 256) -> int:
+    sim = make_sim(n_envs)
+    attach(driver, sim)
+    signals = 0
+    for _ in range(decisions):
+        actions = driver.act(sim)
+        signals += int(((actions == Action.LANE_LEFT) | (actions == Action.LANE_RIGHT)).sum())
+        sim.step(actions)
+    return signals
+
+
 def test_idm_limits_keeps_its_lane():
     from hydra.utils import instantiate
 
     node = yaml.safe_load((CONF_DIR / "model" / "idm_limits.yaml").read_text())["driver"]
     driver = instantiate(node)
     assert isinstance(driver, IdmMobilDriver) and not driver.safety_layer and not driver.lane_changes
-    sim = make_sim(256)
-    attach(driver, sim)
-    for _ in range(40):
-        actions = driver.act(sim)
-        assert not bool(((actions == Action.LANE_LEFT) | (actions == Action.LANE_RIGHT)).any())
-        sim.step(actions)
+    assert _lane_change_signals(driver) == 0
     # The same rule with MOBIL on changes lanes in the same traffic, so the switch is what stops it.
-    mobil = IdmMobilDriver(safety_layer=False)
-    sim = make_sim(256)
-    attach(mobil, sim)
-    changes = 0
-    for _ in range(40):
-        actions = mobil.act(sim)
-        changes += int(((actions == Action.LANE_LEFT) | (actions == Action.LANE_RIGHT)).sum())
-        sim.step(actions)
-    assert changes > 0
+    assert _lane_change_signals(IdmMobilDriver(safety_layer=False)) > 0
