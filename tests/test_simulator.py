@@ -94,6 +94,49 @@ def test_collision_reward_and_termination():
     assert float(res.episode["collisions"][0]) == 1.0
 
 
+@pytest.mark.parametrize("bumper_gap, crash_decision", [(9.5, 1), (10.5, 2)])
+def test_rear_end_is_charged_on_the_decision_it_happens_in(bumper_gap, crash_decision):
+    # Closing at 20 m/s, the host gains 2 m per 0.1 s sub-step and 10 m per decision: a 9.5 m gap
+    # closes in the decision's last sub-step and must be charged to it, a 10.5 m gap in the next one.
+    sim = calm(empty_road(make_sim(), host_speed=30.0))
+    half_lengths = float(sim.half_len_by_type[0] + sim.half_len_by_type[sim.config.type_index("CHV")])
+    place(sim, 1, lon=half_lengths + bumper_gap, lane=2, speed=10.0)
+    for decision in range(1, 3):
+        res = step(sim, Action.NO_ACTION)
+        assert bool(res.collision[0]) == (decision == crash_decision), decision
+        if bool(res.collision[0]):
+            break
+
+
+def test_a_crash_never_pays_an_overtake():
+    # The host passes a slow car in the next lane and runs into another in its own lane within one
+    # decision: the collision ends the decision, so neither counts as overtaken.
+    sim = calm(empty_road(make_sim(), host_speed=30.0))
+    place(sim, 1, lon=2.0, lane=1, speed=10.0)
+    half_lengths = float(sim.half_len_by_type[0] + sim.half_len_by_type[sim.config.type_index("CHV")])
+    place(sim, 2, lon=half_lengths + 4.0, lane=2, speed=10.0)
+    res = step(sim, Action.NO_ACTION)
+    assert bool(res.collision[0])
+    assert float(res.overtakes[0]) == 0 and float(res.terms.overtake[0]) == 0.0
+    assert float(res.reward[0]) == pytest.approx(float(res.terms.speed[0] + res.terms.collision[0]
+                                                       + res.terms.dangerous[0]), abs=1e-5)
+
+
+def test_always_accelerating_host_crashes_without_overtake_reward():
+    # The reviewer's probe: a host that always accelerates in scenario 3 crashes often, and before the
+    # fix about 45% of its crash steps were paid R_o (the host passed through the car it hit).
+    sim = make_sim(n_envs=64, scenario="3", seed=0)
+    crashes = paid = 0
+    for _ in range(60):
+        res = step(sim, Action.ACCELERATE)
+        crashes += int(res.collision.sum())
+        paid += int((res.collision & ((res.overtakes > 0) | (res.terms.overtake != 0))).sum())
+        if bool(res.done.any()):
+            sim.reset(res.done)
+    assert crashes >= 50
+    assert paid == 0
+
+
 def test_dangerous_action_reward_when_tailgating():
     sim = calm(empty_road(make_sim(), host_speed=60 * KMH))
     place(sim, 1, lon=15.0, lane=2, speed=60 * KMH)  # 10.5 m at 16.7 m/s: 0.63 s time gap

@@ -313,14 +313,12 @@ class HighwaySimulator:
         npc_crashes = torch.zeros(n, device=d)
         start_pos = pos_lon
         lat_step = v_lat * dt
+
+        def gap_to_lead(pos: torch.Tensor) -> torch.Tensor:
+            return torch.where(has_lead, gather_vehicles(pos, lead, INF) - pos.unsqueeze(-1) - len_sum, INF)
+
+        gap = gap_to_lead(pos_lon)
         for _ in range(c.substeps):
-            gap = torch.where(has_lead, gather_vehicles(pos_lon, lead, INF) - pos_lon.unsqueeze(-1) - len_sum, INF)
-            # Collisions: a leader in a shared lane whose body overlaps ours; a pair is (i, lead).
-            overlap = (gap < 0) & ((gather_vehicles(pos_lat, lead, 0.0) - pos_lat.unsqueeze(-1)).abs() < wid_sum)
-            # On CPU skipping the bookkeeping when nothing overlaps pays; on a GPU the check itself
-            # would stall the stream, so the bookkeeping always runs there.
-            if self.device.type != "cpu" or bool(overlap.any()):
-                hit, npc_crashes = self._record_crashes(overlap, lead, hit, npc_crashes)
             # Longitudinal: eq. 2 for everyone, then the Krauss safe speed for guarded drivers.
             v_cmd = speed + accel_cmd * dt
             v_cmd = torch.where(accel_cmd > 0, torch.minimum(v_cmd, speed.clamp(min=v_max)), v_cmd)
@@ -335,15 +333,24 @@ class HighwaySimulator:
             # Lateral (eq. 3): v_lat towards the target lane's centre, stopping there.
             dlat = target_lat - pos_lat
             pos_lat = pos_lat + dlat.sign() * torch.minimum(dlat.abs(), lat_step)
-        host_lead = lead[:, HOST]
-        final_gap = torch.where(has_lead[:, HOST], gather_vehicles(pos_lon, host_lead, INF)
-                                - pos_lon[:, HOST:HOST + 1] - len_sum[:, HOST], INF)
+            # Collisions, checked after every move (the last sub-step's included, so that a crash
+            # is charged to the decision it happens in): a leader in a shared lane whose body
+            # overlaps ours; a pair is (i, lead).
+            gap = gap_to_lead(pos_lon)
+            overlap = (gap < 0) & ((gather_vehicles(pos_lat, lead, 0.0) - pos_lat.unsqueeze(-1)).abs() < wid_sum)
+            # On CPU skipping the bookkeeping when nothing overlaps pays; on a GPU the check itself
+            # would stall the stream, so the bookkeeping always runs there.
+            if self.device.type != "cpu" or bool(overlap.any()):
+                hit, npc_crashes = self._record_crashes(overlap, lead, hit, npc_crashes)
+        final_gap = gap[:, HOST]
 
         # --- host events
-        host_collision = hit[:, HOST]
         host_pos = pos_lon[:, HOST]
         ahead_now = pos_lon > host_pos.unsqueeze(1)
-        overtaken = s.was_ahead & ~ahead_now & ~s.passed & s.active
+        # A host collision ends the decision: nothing is overtaken in it, neither the vehicle the
+        # sub-steps carried the host through nor any other, so a crash never pays R_o.
+        host_collision = hit[:, HOST]
+        overtaken = s.was_ahead & ~ahead_now & ~s.passed & s.active & ~host_collision.unsqueeze(1)
         overtaken[:, HOST] = False
         n_overtakes = overtaken.sum(1).float()
         host_v = speed[:, HOST].clamp(min=1e-3)
