@@ -205,7 +205,7 @@ def bench_learner_updates(device: torch.device, seconds: float, batch_size: int 
     built by the learner's own builders; `mode` is eager, compile or cuda_graph."""
     from tensordict import TensorDict
 
-    from .learner.builders import make_actor, make_loss, make_network, make_update
+    from .learner.builders import make_actor, make_loss, make_network, make_optimizer, make_update
     from .simulator import N_ACTIONS
 
     job = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
@@ -213,7 +213,7 @@ def bench_learner_updates(device: torch.device, seconds: float, batch_size: int 
     net = make_network(job).to(device)
     actor = make_actor(net).to(device)
     loss = make_loss(job.learner, actor).to(device)
-    optimizer = torch.optim.Adam(loss.parameters(), lr=job.learner.lr)
+    optimizer = make_optimizer(job.learner, loss.parameters())
     update = make_update(job.learner, loss, optimizer, device)
     h, w, f = job.observation.height, job.observation.width, job.observation.frame_stack
     gen = torch.Generator(device=device).manual_seed(0)

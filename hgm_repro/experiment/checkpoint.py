@@ -22,6 +22,7 @@ CHECKPOINT_FORMAT = 1
 # The files a training leaves in its checkpoint directory that evaluation may load.
 FINAL_CHECKPOINT = "final.pt"  # the network at the end of training: the paper's protocol tests this one
 BEST_CHECKPOINT = "best.pt"  # the network with the best validation return so far (validation on only)
+EMA_CHECKPOINT = "ema.pt"  # the exponential moving average of the online weights (learner.ema_decay > 0)
 
 # What a network's weights depend on: evaluation needs only these to match.
 ARCHITECTURE_KEYS = ("model.name", "model.network", "model.streams", "observation")

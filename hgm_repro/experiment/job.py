@@ -26,7 +26,7 @@ from omegaconf import DictConfig, OmegaConf
 
 from ..metrics import VALIDATION_RETURN
 from ..simulator.config import ConfigError, ScenarioConfig
-from .checkpoint import BEST_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchError
+from .checkpoint import BEST_CHECKPOINT, EMA_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchError
 from .interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
 from .schema import JobConfig, validate
 from .tracking import (
@@ -286,9 +286,9 @@ def _open_training(
 def _log_trained(job: JobConfig, tracker: Tracker, run_id: str, checkpoint: Path) -> None:
     """A finished training's artifacts: final.pt (and best.pt), the MLflow model, the checkpoint's path."""
     tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
-    best = checkpoint.with_name(BEST_CHECKPOINT)
-    if best.is_file():
-        tracker.log_artifact(run_id, best, CHECKPOINT_ARTIFACT)
+    for kept in (BEST_CHECKPOINT, EMA_CHECKPOINT):
+        if checkpoint.with_name(kept).is_file():
+            tracker.log_artifact(run_id, checkpoint.with_name(kept), CHECKPOINT_ARTIFACT)
     if job.tracking.log_model:
         import torch
 
@@ -365,6 +365,13 @@ def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
     which = job.eval.checkpoint
     if training.checkpoint is None or which == "final":
         return training.checkpoint
+    if which == "ema":
+        ema = training.checkpoint.with_name(EMA_CHECKPOINT)
+        if not ema.is_file():
+            raise ConfigError(f"eval.checkpoint=ema, but the training (run {training.run_id}) kept no {EMA_CHECKPOINT} "
+                              f"beside {training.checkpoint}: it trained with learner.ema_decay=0. Evaluate the final "
+                              "network (eval.checkpoint=final), or train again with learner.ema_decay=0.999.")
+        return ema
     best = training.checkpoint.with_name(BEST_CHECKPOINT)
     if not best.is_file():
         raise ConfigError(

@@ -89,6 +89,14 @@ class LearnerSchema:
     cuda_graph: bool = False
     grouped: Literal["auto", True, False] = "auto"
     update_dtype: Literal["float32", "bfloat16"] = "float32"
+    # Options from the learner study of issue 20 (hgm_repro.learner.exploration, dqn); each default
+    # trains as before the option existed.
+    eps_floor: float = field(default=0.0, metadata=unit())
+    eps_floor_steps: int = field(default=0, metadata=ge(0))
+    random_lane_change_share: float = field(default=0.4, metadata=unit())
+    adam_eps: float = field(default=1e-8, metadata=gt(0))
+    target_tau: float = field(default=0.0, metadata=unit())
+    ema_decay: float = field(default=0.0, metadata=unit())
 
 
 @dataclass(frozen=True)
@@ -113,7 +121,7 @@ class TrackingSchema:
 
 @dataclass(frozen=True)
 class EvalSchema:
-    checkpoint: Literal["final", "best"] = "final"
+    checkpoint: Literal["final", "best", "ema"] = "final"
 
 
 @dataclass(frozen=True)
@@ -239,6 +247,10 @@ def _check_eval(evaluation: Any, model: Any, learner: Any, errors: list[str]) ->
         if isinstance(learner, LearnerSchema) and not learner.eval_every:
             errors.append("eval.checkpoint=best is not allowed with learner.eval_every=0: without validation "
                           "training keeps no best.pt (set learner.eval_every=N, or eval.checkpoint=final)")
+    if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "ema" and learned:
+        if isinstance(learner, LearnerSchema) and not learner.ema_decay:
+            errors.append("eval.checkpoint=ema is not allowed with learner.ema_decay=0: training keeps no moving "
+                          "average of the weights (set learner.ema_decay, e.g. 0.999, or eval.checkpoint=final)")
 
 
 def _check_tracking(tracking: Any, errors: list[str]) -> None:
@@ -286,6 +298,11 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
             f"must be >= learner.batch_size={learner.batch_size}"
         )
 
+    if isinstance(learner, LearnerSchema) and learner.eps_floor_steps and learner.eps_floor > learner.eps_end:
+        errors.append(f"learner.eps_floor={learner.eps_floor} is not allowed above learner.eps_end={learner.eps_end}: "
+                      "the second decay phase only lowers epsilon")
+    if isinstance(learner, LearnerSchema) and learner.ema_decay >= 1.0:
+        errors.append(f"learner.ema_decay={learner.ema_decay} is not allowed: must be in [0, 1) (0 = off)")
     if isinstance(learner, LearnerSchema) and learner.update_dtype == "bfloat16" \
             and not str(root.get("device", "")).startswith("cuda"):
         errors.append(f"learner.update_dtype=bfloat16 is not allowed with device={root.get('device')!r}: bf16 "

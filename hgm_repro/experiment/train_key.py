@@ -34,7 +34,8 @@ NON_TRAINING_LEARNER_KEYS = frozenset(
 )
 # Learner values added after trainings were stored, at the value that trains as before: left out
 # of the key at that value, so that existing trainings keep their keys.
-LEARNER_KEYS_ADDED_LATER = {"update_dtype": "float32"}
+LEARNER_KEYS_ADDED_LATER = {"update_dtype": "float32", "eps_floor": 0.0, "eps_floor_steps": 0,
+                            "random_lane_change_share": 0.4, "adam_eps": 1e-8, "target_tau": 0.0, "ema_decay": 0.0}
 # Model values that name or describe the model without changing its training.
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
 

@@ -11,12 +11,14 @@ from tensordict import TensorDict, TensorDictBase
 from tensordict.nn import TensorDictModule, TensorDictSequential
 from torch import nn
 from torchrl.data import LazyTensorStorage, OneHot, TensorDictPrioritizedReplayBuffer
-from torchrl.modules import EGreedyModule, QValueActor
-from torchrl.objectives import DQNLoss
+from torchrl.modules import QValueActor
+from torchrl.objectives import DQNLoss, HardUpdate, SoftUpdate
+from torchrl.objectives.utils import TargetNetUpdater
 
 from ..experiment.schema import JobConfig, LearnerSchema
 from ..observations import ObservationConfig
 from ..simulator import N_ACTIONS
+from .exploration import EpsilonGreedy
 from .priority_trees import install_if_missing
 
 install_if_missing()
@@ -45,13 +47,30 @@ def make_actor(net: nn.Module) -> QValueActor:
     return QValueActor(module, spec=OneHot(N_ACTIONS), action_space="one-hot")
 
 
-def make_exploration(learner: LearnerSchema, device: torch.device) -> EGreedyModule:
-    """Epsilon-greedy over the actor's action, annealed linearly over `eps_steps` env steps."""
-    return EGreedyModule(OneHot(N_ACTIONS, device=device), eps_init=learner.eps_start, eps_end=learner.eps_end,
-                         annealing_num_steps=learner.eps_steps, device=device)
+def make_exploration(learner: LearnerSchema, device: torch.device) -> EpsilonGreedy:
+    """Epsilon-greedy over the actor's action, annealed linearly over `eps_steps` env steps (then to
+    `eps_floor` over `eps_floor_steps` more), drawing lane changes at `random_lane_change_share`."""
+    return EpsilonGreedy(learner.eps_start, learner.eps_end, learner.eps_steps, eps_floor=learner.eps_floor,
+                         floor_steps=learner.eps_floor_steps, lane_change_share=learner.random_lane_change_share,
+                         device=device)
 
 
-def make_policy(actor: QValueActor, exploration: EGreedyModule) -> TensorDictSequential:
+def make_optimizer(learner: LearnerSchema, params, capturable: bool = False) -> torch.optim.Adam:
+    """The learner's one optimiser: Adam at `learner.lr` with `learner.adam_eps`."""
+    return torch.optim.Adam(params, lr=learner.lr, eps=learner.adam_eps, capturable=capturable)
+
+
+def make_target_updater(learner: LearnerSchema, loss_module: DQNLoss) -> TargetNetUpdater:
+    """Hard copies every `target_update_steps` env steps, or Polyak averaging at `target_tau` per update."""
+    if learner.target_tau > 0:
+        return SoftUpdate(loss_module, tau=learner.target_tau)
+    updates_per_target = max(1, round(learner.target_update_steps / learner.update_every))
+    # HardUpdate copies on the (interval + 1)-th call: interval = period - 1 gives exactly one
+    # copy every target_update_steps env steps.
+    return HardUpdate(loss_module, value_network_update_interval=updates_per_target - 1)
+
+
+def make_policy(actor: QValueActor, exploration: EpsilonGreedy) -> TensorDictSequential:
     return TensorDictSequential(actor, exploration)
 
 

@@ -5,6 +5,7 @@ See the package docstring (`hgm_repro.learner`) for what a checkpoint holds and 
 
 from __future__ import annotations
 
+import copy
 import logging
 import math
 import random
@@ -20,12 +21,17 @@ import torch
 from tensordict import TensorDictBase
 from torchrl.collectors import Collector
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
-from torchrl.objectives import HardUpdate
 from tqdm import tqdm
 
 from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
-from ..experiment.checkpoint import BEST_CHECKPOINT, load_checkpoint, recorded_training_config, save_checkpoint
+from ..experiment.checkpoint import (
+    BEST_CHECKPOINT,
+    EMA_CHECKPOINT,
+    load_checkpoint,
+    recorded_training_config,
+    save_checkpoint,
+)
 from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
 from ..experiment.schema import JobConfig
 from ..experiment.train_key import train_key
@@ -35,8 +41,10 @@ from .builders import (
     make_exploration,
     make_loss,
     make_network,
+    make_optimizer,
     make_policy,
     make_replay_buffer,
+    make_target_updater,
     make_update,
 )
 from .n_step import NStepReturns
@@ -77,6 +85,15 @@ def _buffer_megabytes(buffer) -> float:
     return len(buffer) * one.bytes() / 2**20
 
 
+def update_ema(ema_net: torch.nn.Module, net: torch.nn.Module, decay: float) -> None:
+    """One step of the exponential moving average of the online weights (buffers are copied)."""
+    with torch.no_grad():
+        for averaged, current in zip(ema_net.parameters(), net.parameters(), strict=True):
+            averaged.lerp_(current, 1.0 - decay)
+        for averaged, current in zip(ema_net.buffers(), net.buffers(), strict=True):
+            averaged.copy_(current)
+
+
 def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     """Train `job.model` on `job.train_scenario`; returns the final checkpoint's path.
 
@@ -87,6 +104,7 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     checkpoint_dir = Path(checkpoint_dir)
     last_path, final_path = checkpoint_dir / "last.pt", checkpoint_dir / "final.pt"
     best_path = checkpoint_dir / BEST_CHECKPOINT
+    ema_path = checkpoint_dir / EMA_CHECKPOINT
     device = torch.device(job.device)
     config = recorded_training_config(job)
     this_train_key = train_key(job)
@@ -121,11 +139,10 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     exploration = make_exploration(L, device)
     policy = make_policy(actor, exploration)
     loss_module = make_loss(L, actor).to(device)
-    updates_per_target = max(1, round(L.target_update_steps / update_every))
-    # HardUpdate copies on the (interval + 1)-th call: interval = period - 1 gives exactly one
-    # copy every target_update_steps env steps.
-    target_updater = HardUpdate(loss_module, value_network_update_interval=updates_per_target - 1)
-    optimizer = torch.optim.Adam(loss_module.parameters(), lr=L.lr, capturable=L.cuda_graph and device.type == "cuda")
+    target_updater = make_target_updater(L, loss_module)
+    optimizer = make_optimizer(L, loss_module.parameters(), capturable=L.cuda_graph and device.type == "cuda")
+    # The moving average of the online weights (learner.ema_decay > 0): tested from ema.pt.
+    ema_net = copy.deepcopy(net).requires_grad_(False) if L.ema_decay > 0 else None
     buffer = make_replay_buffer(L, device)
     n_batches = total_steps // frames_per_batch
     beta_schedule = LinearScheduler(buffer, "beta", final_value=L.per_beta_end, num_steps=n_batches)
@@ -146,7 +163,10 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         exploration.load_state_dict(resume["exploration"])
         beta_schedule.load_state_dict(resume["beta_schedule"])
         buffer.sampler.beta = resume["beta"]
-        target_updater.counter = resume["target_counter"]
+        if hasattr(target_updater, "counter"):  # hard updates count; Polyak averaging has no phase
+            target_updater.counter = resume["target_counter"]
+        if ema_net is not None:
+            ema_net.load_state_dict(resume.get("ema_network") or resume["network"])
         updates_done, update_credit = resume["updates"], resume["update_credit"]
         if resume["replay_buffer"] is not None:
             buffer.load_state_dict(resume["replay_buffer"])
@@ -172,7 +192,8 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
             "network": net.state_dict(), "loss": loss_module.state_dict(), "optimizer": optimizer.state_dict(),
             "exploration": exploration.state_dict(), "epsilon": float(exploration.eps),
             "beta_schedule": beta_schedule.state_dict(), "beta": float(buffer.sampler.beta),
-            "target_counter": target_updater.counter,
+            "target_counter": getattr(target_updater, "counter", 0),
+            **({"ema_network": ema_net.state_dict()} if ema_net is not None else {}),
             "replay_buffer": buffer.state_dict() if small else None,
             "rng": _rng_state(), "env_rng": env.simulator.generator.get_state(), "best_val_return": best_val,
         }
@@ -191,7 +212,18 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
             best["replay_buffer"] = None  # the weights are what best.pt is for
             save_checkpoint(best, best_path)
         metrics["val/best_episode_return"] = best_val
+        if ema_net is not None:  # the averaged weights on the same validation traffic
+            ema_net.eval()
+            metrics.update(episode_means(run_episodes(val_env, ema_actor, L.val_episodes,
+                                                      job.seed + VAL_SEED_OFFSET), "val_ema"))
         return metrics
+
+    ema_actor = make_actor(ema_net).to(device) if ema_net is not None else None
+
+    def save_ema(state: dict[str, Any]) -> None:
+        """ema.pt: a finished checkpoint whose network is the moving average (no replay memory)."""
+        if ema_net is not None:
+            save_checkpoint({**state, "network": ema_net.state_dict(), "replay_buffer": None}, ema_path)
 
     def stop(interrupted: JobInterrupted | None = None) -> None:
         """A stop signal ends training between batches, never inside one: last.pt holds everything
@@ -244,6 +276,8 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
                 priority = torch.nan_to_num(out["td_error"].sqrt(), nan=1.0, posinf=1.0)
                 buffer.update_priority(sample["index"], priority)
                 target_updater.step()
+                if ema_net is not None:
+                    update_ema(ema_net, net, L.ema_decay)
                 batch_losses.append(out["loss"])
                 updates_done += 1
             if batch_losses:
@@ -280,9 +314,11 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
             with deferred():  # a signal during the store write waits for the stop below, after last.pt
                 log(metrics, steps_done)
             if progress.disable:  # no bar when output goes to a file: a line per log interval instead
-                logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h",
+                logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h, "
+                            "crashes per episode %.2f (greedy validation %.2f)",
                             job.model.name, steps_done, total_steps, metrics["train/steps_per_s"],
-                            metrics["train/epsilon"], metrics.get("train/avg_speed_kmh", float("nan")))
+                            metrics["train/epsilon"], metrics.get("train/avg_speed_kmh", float("nan")),
+                            metrics.get("train/collisions", float("nan")), metrics.get("val/collisions", float("nan")))
             episodes = {k: [] for k in TRAINING_CURVE_METRICS}
             losses = []
             last_log_steps, last_log_time = steps_done, now
@@ -298,5 +334,6 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     if steps_done < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
         warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
     final = checkpoint_state(finished=True)
+    save_ema(final)
     save_checkpoint(final, last_path)
     return save_checkpoint(final, final_path)

@@ -46,7 +46,7 @@ from ..experiment.schema import JobConfig
 from ..experiment.train_key import train_key, training_config
 from ..metrics import TRAINING_CURVE_METRICS
 from ..simulator import N_ACTIONS
-from .builders import make_actor, make_exploration, make_loss, make_network, make_replay_buffer
+from .builders import make_actor, make_exploration, make_loss, make_network, make_optimizer, make_replay_buffer
 from .dqn import VAL_SEED_OFFSET, NonFiniteLossError, _buffer_megabytes, _rng_state, _set_rng_state
 from .n_step import NStepReturns
 from .training_reward import training_reward
@@ -88,6 +88,11 @@ def check_group(jobs: Sequence[JobConfig]) -> None:
             raise ValueError(f"members of a training group must have the same training config except the seed; "
                              f"'{job.model.name}' seed {job.seed} differs from '{jobs[0].model.name}' seed "
                              f"{jobs[0].seed} in more than the seed")
+    learner = jobs[0].learner
+    solo_only = {k: v for k, v in (("target_tau", learner.target_tau), ("ema_decay", learner.ema_decay)) if v}
+    if solo_only:
+        raise ValueError(f"{', '.join(f'learner.{k}={v}' for k, v in solo_only.items())} is not supported by grouped "
+                         "training yet (it keeps hard target copies and no moving average): use learner.grouped=false")
     seeds = [job.seed for job in jobs]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"members of a training group need distinct seeds; got seeds {seeds}")
@@ -243,7 +248,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
         # Registered only so that TorchRL knows the target is updated: the group copies the
         # stacked target itself, with HardUpdate's rule.
         HardUpdate(loss_module, value_network_update_interval=updates_per_target - 1)
-        optimizer = torch.optim.Adam(loss_module.parameters(), lr=L.lr)
+        optimizer = make_optimizer(L, loss_module.parameters())
         exploration = make_exploration(L, device)
         buffer = make_replay_buffer(L, device)
         beta = LinearScheduler(buffer, "beta", final_value=L.per_beta_end, num_steps=n_batches)
@@ -290,7 +295,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
         target_nets.append(target_net)
     target_params = {k: v.detach() for k, v in stack_module_state(target_nets)[0].items()}
     base = copy.deepcopy(nets[0]).to("meta")
-    optimizer = torch.optim.Adam([params[n] for n in names], lr=L.lr)
+    optimizer = make_optimizer(L, [params[n] for n in names])
     if resume0:
         _stack_adam_state(optimizer, params, names, nets, [p["optimizer"] for p in parts])
     in_keys = list(nets[0].in_keys)
@@ -311,7 +316,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
                 greedy = forward({n: params[n].detach() for n in names}, buffers, *obs).argmax(-1)
         for k, p in enumerate(parts):
             rng = p["explore_rng"]
-            random_action = torch.randint(N_ACTIONS, (n_envs,), generator=rng, device=device)
+            random_action = p["exploration"].random_actions(n_envs, generator=rng)
             if random_only:
                 actions.append(random_action)
                 continue

@@ -1,0 +1,128 @@
+"""The learner options of the issue-20 study: two-phase epsilon, shaped random actions, Adam's eps,
+Polyak target updates and the moving average of the weights. Each default trains as before."""
+
+from __future__ import annotations
+
+import pytest
+import torch
+from omegaconf import open_dict
+from tensordict import TensorDict
+from torchrl.objectives import HardUpdate, SoftUpdate
+
+from hgm_repro.experiment.checkpoint import EMA_CHECKPOINT, load_checkpoint
+from hgm_repro.experiment.schema import validate
+from hgm_repro.experiment.train_key import train_key
+from hgm_repro.learner import train
+from hgm_repro.learner.builders import make_actor, make_loss, make_network, make_optimizer, make_target_updater
+from hgm_repro.learner.exploration import LANE_CHANGES, EpsilonGreedy, random_action_probs
+from hgm_repro.learner.grouped import check_group
+from hgm_repro.simulator import N_ACTIONS
+from hgm_repro.simulator.config import ConfigError
+
+from .test_learner import Recorder, compose_cfg, compose_job
+
+
+def test_epsilon_falls_to_eps_end_then_to_the_floor():
+    eps = EpsilonGreedy(1.0, 0.05, 160, eps_floor=0.01, floor_steps=320)
+    seen = []
+    for _ in range(40):
+        eps.step(16)
+        seen.append(float(eps.eps))
+    assert seen[9] == pytest.approx(0.05, abs=1e-6)  # 160 steps: the first phase ends
+    assert seen[19] == pytest.approx(0.03, abs=1e-6)  # half-way down the second phase
+    assert seen[29] == pytest.approx(0.01, abs=1e-6) and seen[-1] == pytest.approx(0.01, abs=1e-6)
+    assert seen == sorted(seen, reverse=True)
+
+
+def test_without_a_second_phase_the_schedule_is_torchrls():
+    from torchrl.data import OneHot
+    from torchrl.modules import EGreedyModule
+
+    ours, theirs = EpsilonGreedy(1.0, 0.05, 100), EGreedyModule(OneHot(N_ACTIONS), 1.0, 0.05, 100)
+    for _ in range(10):
+        ours.step(16)
+        theirs.step(16)
+        assert float(ours.eps) == float(theirs.eps)
+    assert set(ours.state_dict()) == set(theirs.state_dict())  # checkpoints load either way
+
+
+def test_a_floor_above_eps_end_is_refused():
+    with pytest.raises(ValueError, match="eps_floor=0.2 is not allowed above eps_end=0.1"):
+        EpsilonGreedy(1.0, 0.1, 100, eps_floor=0.2, floor_steps=10)
+    with pytest.raises(ConfigError, match="learner.eps_floor=0.5 is not allowed above learner.eps_end"):
+        validate(compose_cfg("learner.eps_floor=0.5", "learner.eps_floor_steps=100"))
+
+
+@pytest.mark.parametrize("share", [0.0, 0.1, 0.4, 1.0])
+def test_random_actions_change_lanes_at_the_chosen_share(share):
+    eps = EpsilonGreedy(1.0, 1.0, 1, lane_change_share=share)
+    drawn = eps.random_actions(20_000, generator=torch.Generator().manual_seed(0))
+    lane_changes = torch.isin(drawn, torch.tensor(LANE_CHANGES)).float().mean()
+    assert float(lane_changes) == pytest.approx(share, abs=0.015)
+    assert random_action_probs(share).sum() == pytest.approx(1.0)
+
+
+def test_the_uniform_share_draws_what_randint_draws():
+    eps = EpsilonGreedy(1.0, 1.0, 1)
+    ours = eps.random_actions(100, generator=torch.Generator().manual_seed(3))
+    assert torch.equal(ours, torch.randint(N_ACTIONS, (100,), generator=torch.Generator().manual_seed(3)))
+
+
+def test_exploring_policy_keeps_the_lane_when_the_share_is_zero():
+    eps = EpsilonGreedy(1.0, 1.0, 1, lane_change_share=0.0)
+    greedy = torch.nn.functional.one_hot(torch.full((4096,), 2), N_ACTIONS)  # always "change left"
+    out = eps(TensorDict(action=greedy.clone(), batch_size=[4096]))["action"].argmax(-1)
+    assert not torch.isin(out, torch.tensor(LANE_CHANGES)).any()  # epsilon 1: every action random
+
+
+def test_adam_eps_and_polyak_targets_come_from_the_config():
+    job = compose_job("model=proposed", "learner.adam_eps=1.5e-4", "learner.target_tau=0.01")
+    loss = make_loss(job.learner, make_actor(make_network(job)))
+    assert make_optimizer(job.learner, loss.parameters()).defaults["eps"] == 1.5e-4
+    updater = make_target_updater(job.learner, loss)
+    assert isinstance(updater, SoftUpdate)
+    online = dict(loss.value_network_params.flatten_keys().items())
+    target = {k: v.clone() for k, v in loss.target_value_network_params.flatten_keys().items()}
+    with torch.no_grad():
+        for v in online.values():
+            v.add_(1.0)
+    updater.step()
+    after = dict(loss.target_value_network_params.flatten_keys().items())
+    for key, before in target.items():  # one step moves the target 1% of the way
+        assert torch.allclose(after[key], before + 0.01 * (online[key] - before), atol=1e-6)
+    hard = compose_job("model=proposed")
+    assert isinstance(make_target_updater(hard.learner, make_loss(hard.learner, make_actor(make_network(hard)))),
+                      HardUpdate)
+
+
+def test_new_options_at_their_defaults_keep_the_train_key():
+    cfg = compose_cfg()
+    with open_dict(cfg):
+        for key in ("eps_floor", "eps_floor_steps", "random_lane_change_share", "adam_eps", "target_tau",
+                    "ema_decay"):
+            del cfg.learner[key]
+    assert train_key(validate(cfg)) == train_key(compose_job())
+    assert train_key(compose_job("learner.random_lane_change_share=0.1")) != train_key(compose_job())
+
+
+def test_grouped_training_refuses_what_it_does_not_do_yet():
+    jobs = [compose_job("learner.ema_decay=0.99", f"seed={s}") for s in (0, 1)]
+    with pytest.raises(ValueError, match="learner.ema_decay=0.99 is not supported by grouped training"):
+        check_group(jobs)
+
+
+def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):
+    job = compose_job("learner.ema_decay=0.9", "learner.eval_every=64", "learner.val_envs=2",
+                      "learner.random_lane_change_share=0.1", "learner.eps_floor=0.01", "learner.eps_floor_steps=64",
+                      "learner.eps_steps=32", "eval.checkpoint=ema")
+    log = Recorder()
+    final = train(job, tmp_path, log)
+    ema = load_checkpoint(tmp_path / EMA_CHECKPOINT, job)
+    last = load_checkpoint(final, job)
+    assert ema["finished"] and ema["replay_buffer"] is None
+    assert all(torch.equal(ema["network"][k], last["ema_network"][k]) for k in ema["network"])
+    assert any(not torch.equal(ema["network"][k], last["network"][k]) for k in ema["network"])
+    assert log.steps("val_ema/episode_return") == [64, 128] == log.steps("val/episode_return")
+    assert last["epsilon"] == pytest.approx(0.01)
+    with pytest.raises(ConfigError, match="eval.checkpoint=ema is not allowed with learner.ema_decay=0"):
+        validate(compose_cfg("eval.checkpoint=ema"))
