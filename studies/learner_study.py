@@ -125,6 +125,8 @@ def _command(arm: str, seed: int, uri: str, extra: list[str]) -> list[str]:
 # The second test of an (arm, seed): its best validation checkpoint instead of the final one. It
 # reuses the training (the checkpoint choice is not part of the train_key), so it costs a test only.
 BEST = ["eval.checkpoint=best"]
+# An arm that keeps a moving average of its weights is also tested from ema.pt (reported as ARM@ema).
+EMA = ["eval.checkpoint=ema"]
 
 
 def run(arms: list[str], seeds: list[int], parallel: int, store: Path, also_best: bool = False,
@@ -150,6 +152,8 @@ def run(arms: list[str], seeds: list[int], parallel: int, store: Path, also_best
                 print(f"finished {arm} seed {seed} {' '.join(extra)}: exit {proc.returncode}", flush=True)
                 if also_best and not extra and proc.returncode == 0 and arm in ARMS:
                     queue.insert(0, (arm, seed, BEST))
+                    if any(o.startswith("learner.ema_decay=") for o in ARMS[arm]):
+                        queue.insert(0, (arm, seed, EMA))
         time.sleep(5)
 
 
@@ -162,7 +166,8 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--parallel", type=int, default=2, help="jobs at once (one torch thread each)")
     r.add_argument("--store", type=Path, default=RUNS / "study.db")
     r.add_argument("--also-best", action="store_true",
-                   help="test each training's best validation checkpoint too (reported as ARM@best)")
+                   help="test each training's best validation checkpoint too (reported as ARM@best), and "
+                        "ema.pt of arms that keep one (ARM@ema)")
     r.add_argument("--references", action="store_true",
                    help=f"test the reference hosts ({', '.join(STUDY_REFERENCES)}) on the same seeds")
     rep = sub.add_parser("report", help="curves and final results from the store")

@@ -14,7 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
-from learner_study import ARMS, BEST, ROOT, STUDY_REFERENCES  # noqa: E402
+from learner_study import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
 from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
@@ -76,8 +76,9 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
             if tags.get("stage") == "eval":
                 # A test of the best validation checkpoint (learner_study.py --also-best) is its own row;
                 # a reference host has no checkpoint, whatever the preset names.
-                if arm not in STUDY_REFERENCES and r.data.params.get("eval.checkpoint") == "best":
-                    arm = f"{arm}@best"
+                checkpoint = r.data.params.get("eval.checkpoint")
+                if arm not in STUDY_REFERENCES and checkpoint in ("best", "ema"):
+                    arm = f"{arm}@{checkpoint}"
                 results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
             elif tags.get("stage") == "train":
                 for m in CURVES:
@@ -94,15 +95,16 @@ def report(stores: list[Path], out: Path) -> None:
     results.to_csv(out / "learner_study_per_seed.csv", index=False)
     rows = []
     for arm, grp in results.groupby("arm", sort=False):
-        name, _, best = arm.partition("@")
-        overrides = f"model={arm}" if arm in STUDY_REFERENCES else " ".join(ARMS[name] + (BEST if best else []))
+        name, _, checkpoint = arm.partition("@")
+        overrides = f"model={arm}" if arm in STUDY_REFERENCES else \
+            " ".join(ARMS[name] + ([f"eval.checkpoint={checkpoint}"] if checkpoint else []))
         row = {"arm": arm, "overrides": overrides, "seeds": len(grp)}
         for m in RESULTS:
             est = mean_ci(grp[m].to_numpy(dtype=float))
             row[m] = est.point
             row[f"{m}_lo"], row[f"{m}_hi"] = est.low, est.high
         rows.append(row)
-    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best")], *STUDY_REFERENCES)
+    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema")], *STUDY_REFERENCES)
              if a in set(results["arm"])]
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
