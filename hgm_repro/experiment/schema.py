@@ -97,6 +97,7 @@ class LearnerSchema:
     adam_eps: float = field(default=1e-8, metadata=gt(0))
     target_tau: float = field(default=0.0, metadata=unit())
     ema_decay: float = field(default=0.0, metadata=unit())
+    replay_frames: bool = False
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ KEY_LENGTH = 12
 NON_TRAINING_LEARNER_KEYS = frozenset(
     {"test_steps", "test_envs", "log_every", "checkpoint_every", "compile", "cuda_graph",
      "checkpoint_buffer_max_mb", "torch_threads", "eval_every", "val_envs", "val_episodes",
-     "grouped"}
+     "grouped", "replay_frames"}
 )
 # Learner values added after trainings were stored, at the value that trains as before: left out
 # of the key at that value, so that existing trainings keep their keys.

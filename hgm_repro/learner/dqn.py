@@ -47,6 +47,7 @@ from .builders import (
     make_target_updater,
     make_update,
 )
+from .frame_replay import FrameReplay
 from .n_step import NStepReturns
 from .training_reward import training_reward
 
@@ -144,6 +145,8 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     # The moving average of the online weights (learner.ema_decay > 0): tested from ema.pt.
     ema_net = copy.deepcopy(net).requires_grad_(False) if L.ema_decay > 0 else None
     buffer = make_replay_buffer(L, device)
+    # learner.replay_frames: the same prioritized memory, each frame stored once (frame_replay.py).
+    memory = FrameReplay.for_env(buffer, env, L.n_step) if L.replay_frames else buffer
     n_batches = total_steps // frames_per_batch
     beta_schedule = LinearScheduler(buffer, "beta", final_value=L.per_beta_end, num_steps=n_batches)
     update = make_update(L, loss_module, optimizer, device)
@@ -169,7 +172,9 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
             ema_net.load_state_dict(resume.get("ema_network") or resume["network"])
         updates_done, update_credit = resume["updates"], resume["update_credit"]
         if resume["replay_buffer"] is not None:
-            buffer.load_state_dict(resume["replay_buffer"])
+            memory.load_state_dict(resume["replay_buffer"])
+            if isinstance(memory, FrameReplay):
+                memory.restart()  # the traffic restarts from fresh episodes
         _set_rng_state(resume["rng"])
         # The traffic restarts from fresh episodes (the simulator state is not stored), drawn from
         # the restored generator so that a resume is deterministic and does not replay episode one.
@@ -185,7 +190,8 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         auto_register_policy_transforms=False)  # the Q-network is feed-forward: no InitTracker needed
 
     def checkpoint_state(finished: bool) -> dict[str, Any]:
-        small = _buffer_megabytes(buffer) <= L.checkpoint_buffer_max_mb
+        megabytes = memory.megabytes() if isinstance(memory, FrameReplay) else _buffer_megabytes(buffer)
+        small = megabytes <= L.checkpoint_buffer_max_mb
         return {
             "format": 1, "model": job.model.name, "train_key": this_train_key, "training_config": config,
             "finished": finished, "env_steps": steps_done, "updates": updates_done, "update_credit": update_credit,
@@ -194,7 +200,7 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
             "beta_schedule": beta_schedule.state_dict(), "beta": float(buffer.sampler.beta),
             "target_counter": getattr(target_updater, "counter", 0),
             **({"ema_network": ema_net.state_dict()} if ema_net is not None else {}),
-            "replay_buffer": buffer.state_dict() if small else None,
+            "replay_buffer": memory.state_dict() if small else None,
             "rng": _rng_state(), "env_rng": env.simulator.generator.get_state(), "best_val_return": best_val,
         }
 
@@ -252,9 +258,11 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
                                     ("next", "reward_terms"))
         if reward_scale != 1.0 or collision_weight != 1.0:
             transitions.set(("next", "reward"), training_reward(batch, reward_scale, collision_weight))
+        if isinstance(memory, FrameReplay):
+            transitions = memory.observe(transitions)  # frames kept once; transitions carry their index
         transitions = n_step(transitions)  # n-step windows complete n - 1 decisions later
         if transitions is not None and transitions.numel() > 0:
-            buffer.extend(transitions.reshape(-1))
+            memory.extend(transitions.reshape(-1))
         batch = batch.reshape(-1)
 
         done = batch["next", "done"].reshape(-1)
@@ -264,17 +272,17 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
                 episodes[key].extend(finished[key].tolist())
             recent_speed = float(finished["avg_speed_kmh"].mean())
 
-        if len(buffer) >= learn_from:
+        if len(memory) >= learn_from:
             update_credit += batch.numel() / update_every
             batch_losses = []
             while update_credit >= 1.0:
                 update_credit -= 1.0
-                sample = buffer.sample()
+                sample = memory.sample()
                 out = update(sample)
                 # DQNLoss stores the squared TD error; PER's priority is |delta| (to the alpha).
                 # nan_to_num keeps the sum tree valid until the check below stops the run.
                 priority = torch.nan_to_num(out["td_error"].sqrt(), nan=1.0, posinf=1.0)
-                buffer.update_priority(sample["index"], priority)
+                memory.update_priority(sample["index"], priority)
                 target_updater.step()
                 if ema_net is not None:
                     update_ema(ema_net, net, L.ema_decay)

@@ -89,10 +89,12 @@ def check_group(jobs: Sequence[JobConfig]) -> None:
                              f"'{job.model.name}' seed {job.seed} differs from '{jobs[0].model.name}' seed "
                              f"{jobs[0].seed} in more than the seed")
     learner = jobs[0].learner
-    solo_only = {k: v for k, v in (("target_tau", learner.target_tau), ("ema_decay", learner.ema_decay)) if v}
+    solo_only = {k: v for k, v in (("target_tau", learner.target_tau), ("ema_decay", learner.ema_decay),
+                                   ("replay_frames", learner.replay_frames)) if v}
     if solo_only:
         raise ValueError(f"{', '.join(f'learner.{k}={v}' for k, v in solo_only.items())} is not supported by grouped "
-                         "training yet (it keeps hard target copies and no moving average): use learner.grouped=false")
+                         "training yet (it keeps hard target copies, no moving average and the flat replay memory): "
+                         "use learner.grouped=false")
     seeds = [job.seed for job in jobs]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"members of a training group need distinct seeds; got seeds {seeds}")
