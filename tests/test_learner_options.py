@@ -126,3 +126,17 @@ def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):
     assert last["epsilon"] == pytest.approx(0.01)
     with pytest.raises(ConfigError, match="eval.checkpoint=ema is not allowed with learner.ema_decay=0"):
         validate(compose_cfg("eval.checkpoint=ema"))
+
+
+def test_hgm_options_are_checked_and_keep_the_train_key_at_the_papers_values():
+    cfg = compose_cfg("model=proposed")
+    with open_dict(cfg):
+        del cfg.observation["hgm_ahead"]
+        del cfg.observation["hgm_host_cell"]
+    assert train_key(validate(cfg)) == train_key(compose_job("model=proposed"))
+    assert train_key(compose_job("model=proposed", "observation.hgm_host_cell=own_range")) != \
+        train_key(compose_job("model=proposed"))
+    with pytest.raises(ConfigError, match="hgm_host_cell='corner' is not allowed; allowed: \\['paper', 'own_range'\\]"):
+        validate(compose_cfg("observation.hgm_host_cell=corner"))
+    with pytest.raises(ConfigError, match="observation.hgm_ahead=-5 is not allowed"):
+        validate(compose_cfg("observation.hgm_ahead=-5"))

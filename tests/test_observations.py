@@ -153,6 +153,38 @@ def test_cell_value_is_the_papers_formula():
     assert torch.equal(paper[:, 0], paper[:, 1]) and torch.equal(paper[:, 0], paper[:, 2])
 
 
+def test_paper_host_cell_is_empty_at_60_kmh_and_own_range_is_not():
+    # Every host starts at 60 km/h, the mid speed, where Algorithm 1 writes 0: the empty cell's value.
+    sim = empty_road(make_sim(), host_speed=60 / 3.6)
+    place(sim, 1, 15.0, 4, speed=sim.config.v_min)  # the lowest value another vehicle can write
+    _, winner = reference_hgm(sim)
+    paper = hyper_grid_matrix(sim, encoded=True)[0, 0]
+    assert (paper[winner == HOST] == 128).all() and (paper[winner == -1] == 128).all()
+    own = hyper_grid_matrix(sim, encoded=True, host_cell="own_range")[0, 0]
+    host_code, lowest_other = int(own[winner == HOST].max()), int(own[winner == 1].min())
+    assert host_code < lowest_other and host_code != 128
+    assert torch.equal(own[winner != HOST], paper[winner != HOST])  # everyone else as the paper draws them
+    codes = []  # and the host's speed still reads off its cell, from v_min to v_max
+    for kmh in (40, 50, 60, 70, 80):
+        sim.state.speed[:, HOST] = kmh / 3.6
+        codes.append(int(hyper_grid_matrix(sim, encoded=True, host_cell="own_range")[0, 0][winner == HOST].max()))
+    assert codes == sorted(codes) and len(set(codes)) == 5 and codes[0] == 0 and codes[-1] < lowest_other
+
+
+def test_hgm_ahead_reaches_further_ahead_but_not_behind():
+    sim = empty_road(make_sim())
+    place(sim, 1, 55.0, 0)
+    place(sim, 2, -55.0, 4)
+    lane0, lane4 = slice(0, W // 5), slice(4 * W // 5, W)
+    paper = hyper_grid_matrix(sim, variant="enriched")[0, 1] > 0
+    ahead = hyper_grid_matrix(sim, variant="enriched", ahead=80.0)[0, 1] > 0
+    assert not paper[:, lane0].any() and ahead[:, lane0].any()
+    assert not ahead[:, lane4].any()  # 55 m behind stays out of the 40 m reach behind
+    # The host's own row moves down: 80 m ahead and 40 m behind on the same 84 rows.
+    host_rows = ahead[:, W // 2].nonzero().squeeze(1).float().mean()
+    assert float(host_rows) == pytest.approx(H * 80 / 120, abs=2)
+
+
 def test_covered_cells_match_the_collision_box():
     sim = empty_road(make_sim())
     place(sim, 1, 7.3, 1.9)  # between lanes, at an arbitrary offset

@@ -21,7 +21,9 @@ from .schema import JobConfig
 
 # Bump when the checkpoint format or the meaning of a training config changes, so that
 # old checkpoints are not silently reused by new code.
-TRAIN_KEY_VERSION = 1
+# 2: the simulator stopped paying R_o on crash steps and charges a crash to the decision it happens in
+# (docs/interfaces.md): trainings of version 1 learned from other rewards and are not reused.
+TRAIN_KEY_VERSION = 2
 KEY_LENGTH = 12
 
 # Learner values that change how a run is measured or run, not the trained weights: they may
@@ -35,7 +37,10 @@ NON_TRAINING_LEARNER_KEYS = frozenset(
 # Learner values added after trainings were stored, at the value that trains as before: left out
 # of the key at that value, so that existing trainings keep their keys.
 LEARNER_KEYS_ADDED_LATER = {"update_dtype": "float32", "eps_floor": 0.0, "eps_floor_steps": 0,
-                            "random_lane_change_share": 0.4, "adam_eps": 1e-8, "target_tau": 0.0, "ema_decay": 0.0}
+                            "random_lane_change_share": 0.4, "adam_eps": 1e-8, "target_tau": 0.0, "ema_decay": 0.0,
+                            "replay_frames": False}
+# Observation values added after trainings were stored, likewise (the paper's HGM at these values).
+OBSERVATION_KEYS_ADDED_LATER = {"hgm_ahead": 0.0, "hgm_host_cell": "paper"}
 # Model values that name or describe the model without changing its training.
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
 
@@ -56,7 +61,8 @@ def training_config(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str
     return {
         "version": TRAIN_KEY_VERSION,
         "model": {k: model[k] for k in MODEL_KEYS_IN_KEY if k in model},
-        "observation": root["observation"],
+        "observation": {k: v for k, v in root["observation"].items()
+                        if OBSERVATION_KEYS_ADDED_LATER.get(k, object()) != v},
         "learner": learner,
         "simulator": root["simulator"],
         "train_scenario": root["train_scenario"],
@@ -91,5 +97,8 @@ def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
         # the evaluations of a solo one (and those of stores written before the setting existed).
         payload["learner"] = {k: v for k, v in payload["learner"].items() if k not in NON_EVALUATION_LEARNER_KEYS
                               and LEARNER_KEYS_ADDED_LATER.get(k, object()) != v}
+    if isinstance(payload.get("observation"), Mapping):
+        payload["observation"] = {k: v for k, v in payload["observation"].items()
+                                  if OBSERVATION_KEYS_ADDED_LATER.get(k, object()) != v}
     text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=str)
     return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]

@@ -54,7 +54,8 @@ class ObservationBuilder:
             out["camera"] = birdseye_camera(sim, s, height=c.height, width=c.width, v2x_range=c.v2x_range)
         if c.hgm != "none":
             out["hgm"] = hyper_grid_matrix(sim, s, height=c.height, width=c.width, v2x_range=c.v2x_range,
-                                           variant=c.hgm, encoded=True)
+                                           variant=c.hgm, encoded=True, ahead=c.hgm_ahead,
+                                           host_cell=c.hgm_host_cell)
         if c.coordinates:
             out["coordinates"] = coordinates(sim, s, k=c.coord_k, v2x_range=c.v2x_range)
         return out

@@ -15,6 +15,7 @@ from ..simulator.config import finite_number
 
 CAMERAS = ("front", "birdseye", "none")
 HGM_VARIANTS = ("paper", "enriched", "none")
+HGM_HOST_CELLS = ("paper", "own_range")
 
 # The smallest image the paper's conv stack (8x8/4, 4x4/2, 3x3/1, no padding) accepts:
 # 36 -> 8 -> 3 -> 1.
@@ -60,6 +61,8 @@ class ObservationConfig:
     width: int = 84
     frame_stack: int = 4
     v2x_range: float = 40.0  # D_r, m (Algorithm 1)
+    hgm_ahead: float = 0.0  # m the HGM reaches ahead of the host (0: D_r, the paper's symmetric window)
+    hgm_host_cell: str = "paper"  # paper | own_range (see hyper_grid_matrix.host_cell_values)
     coord_k: int = 16  # K nearest connected vehicles in the coordinate vector
     camera_fov_deg: float = 90.0  # horizontal field of view
     camera_height: float = 1.2  # m above the road
@@ -89,6 +92,11 @@ class ObservationConfig:
             raise ValueError(f"observation.coord_k={self.coord_k} is not allowed: need >= 1")
         if finite_number("observation.v2x_range", self.v2x_range) <= 0:
             raise ValueError(f"observation.v2x_range={self.v2x_range} is not allowed: need > 0 (m)")
+        if finite_number("observation.hgm_ahead", self.hgm_ahead) < 0:
+            raise ValueError(f"observation.hgm_ahead={self.hgm_ahead} is not allowed: need >= 0 (m; 0 = v2x_range)")
+        if self.hgm_host_cell not in HGM_HOST_CELLS:
+            raise ValueError(f"observation hgm_host_cell={self.hgm_host_cell!r} is not allowed; allowed: "
+                             f"{list(HGM_HOST_CELLS)}")
         fov = finite_number("observation.camera_fov_deg", self.camera_fov_deg)
         if not 1.0 <= fov <= 170.0:
             raise ValueError(f"observation.camera_fov_deg={fov} is not allowed: need 1..170 degrees "

@@ -13,6 +13,13 @@ collision box (half extents c_x along the road, c_y across it), 0 elsewhere. Cov
 overlap rule: see `grid.py` (cell centre strictly inside the box; the host, then the vehicle
 nearest to the host along the road, wins a cell where boxes overlap).
 
+Two options that depart from the paper (off by default):
+- `ahead`: the window (and V2X reception) reaches this far ahead instead of D_r; it still reaches
+  D_r behind. Shedding 26 km/h at the host's braking rate takes about 57 m, more than D_r = 40 m.
+- `host_cell="own_range"`: the host's cell maps its speed linearly onto [-1, just below the lowest
+  value any other vehicle can write], so that it differs from an empty cell (0) at every speed; under
+  the paper's formula the host is invisible at the mid speed (60 km/h), where every host starts.
+
 Variants (always 3 channels, like the RGB image):
 - "paper": the value repeated on the 3 channels;
 - "enriched": (value, occupancy, host cell), occupancy and host cell written as -1 (no) / +1
@@ -29,9 +36,12 @@ from ..simulator import HOST, HighwaySimulator, TrafficState
 from .grid import GridGeometry, paint_ranks
 
 
-def hgm_geometry(sim: HighwaySimulator, height: int, width: int, v2x_range: float) -> GridGeometry:
+def hgm_geometry(sim: HighwaySimulator, height: int, width: int, v2x_range: float,
+                 ahead: float = 0.0) -> GridGeometry:
+    """The HGM's grid: D_r behind the host, `ahead` m ahead of it (0: D_r), across the whole road."""
     road_width = sim.config.lanes * sim.config.lane_width
-    return GridGeometry(height=height, width=width, ahead=v2x_range, behind=v2x_range, left=0.0, right=road_width)
+    return GridGeometry(height=height, width=width, ahead=ahead or v2x_range, behind=v2x_range, left=0.0,
+                        right=road_width)
 
 
 def normalised_speed(speed: torch.Tensor, v_min: float, v_max: float) -> torch.Tensor:
@@ -40,10 +50,26 @@ def normalised_speed(speed: torch.Tensor, v_min: float, v_max: float) -> torch.T
     return (speed - mid) / mid
 
 
-def v2x_senders(sim: HighwaySimulator, state: TrafficState, v2x_range: float) -> torch.Tensor:
-    """[N, M] bool: vehicles whose V2X data the host receives (the host itself included)."""
+def v2x_senders(sim: HighwaySimulator, state: TrafficState, v2x_range: float, ahead: float = 0.0) -> torch.Tensor:
+    """[N, M] bool: vehicles whose V2X data the host receives (the host itself included): within D_r
+    behind and D_r (or `ahead` m, when > 0) ahead."""
     rel_lon = state.pos_lon - state.pos_lon[:, HOST:HOST + 1]
-    return sim.connected_by_type[state.vtype] & state.active & (rel_lon.abs() < v2x_range)
+    in_range = (rel_lon > -v2x_range) & (rel_lon < (ahead or v2x_range))
+    return sim.connected_by_type[state.vtype] & state.active & in_range
+
+
+def host_cell_values(value: torch.Tensor, speed: torch.Tensor, v_min: float, v_max: float,
+                     host_cell: str) -> torch.Tensor:
+    """[N, M] cell values with the host's (slot HOST) replaced under `host_cell="own_range"`: its speed
+    mapped linearly onto [-1, lowest - 2/255], where `lowest` is the value of a vehicle at v_min, so
+    that the host never writes another vehicle's value nor the empty cell's 0 (uint8 steps are 1/127.5)."""
+    if host_cell == "paper":
+        return value
+    lowest = float(normalised_speed(torch.tensor(v_min), v_min, v_max))
+    share = ((speed[:, HOST] - v_min) / (v_max - v_min)).clamp(0.0, 1.0)
+    value = value.clone()
+    value[:, HOST] = -1.0 + share * (lowest - 2.0 / 127.5 + 1.0)
+    return value
 
 
 def host_first_priority(rel_lon: torch.Tensor) -> torch.Tensor:
@@ -55,19 +81,21 @@ def host_first_priority(rel_lon: torch.Tensor) -> torch.Tensor:
 
 def hyper_grid_matrix(sim: HighwaySimulator, state: TrafficState | None = None, *, height: int = 84,
                       width: int = 84, v2x_range: float = 40.0, variant: str = "paper",
-                      encoded: bool = False) -> torch.Tensor:
+                      encoded: bool = False, ahead: float = 0.0, host_cell: str = "paper") -> torch.Tensor:
     """The HGM, [N, 3, H, W] (see the module docstring): float32 values in [-1, 1], or with
     `encoded` the uint8 `encode_hgm` of them, computed without a float image in between."""
     if variant not in ("paper", "enriched"):
         raise ValueError(f"hgm variant={variant!r} is not allowed; allowed: ['paper', 'enriched']")
     s = sim.state if state is None else state
     n = s.pos_lon.shape[0]
-    geom = hgm_geometry(sim, height, width, v2x_range)
+    geom = hgm_geometry(sim, height, width, v2x_range, ahead)
     rel_lon = s.pos_lon - s.pos_lon[:, HOST:HOST + 1]
-    value = normalised_speed(s.speed, sim.config.v_min, sim.config.v_max).clamp(-1.0, 1.0)
+    v_min, v_max = sim.config.v_min, sim.config.v_max
+    value = host_cell_values(normalised_speed(s.speed, v_min, v_max).clamp(-1.0, 1.0), s.speed, v_min, v_max,
+                             host_cell)
     key, order = paint_ranks(
         geom, rel_lon, s.pos_lat, sim.half_len_by_type[s.vtype], sim.half_wid_by_type[s.vtype],
-        shown=v2x_senders(sim, s, v2x_range), priority=host_first_priority(rel_lon),
+        shown=v2x_senders(sim, s, v2x_range, ahead), priority=host_first_priority(rel_lon),
         max_half_len=sim.max_half_len, max_half_wid=sim.max_half_wid,
         payload=encode_hgm(value))
     k = order.shape[1]
