@@ -104,6 +104,16 @@ ARMS: dict[str, list[str]] = {
     "r20_all": R20 + ["learner.random_lane_change_share=0.1", "learner.eps_floor=0.01",
                       "learner.eps_floor_steps=30000", "learner.lr=0.0001", "learner.adam_eps=0.00015",
                       "learner.target_tau=0.005", "learner.ema_decay=0.999"],
+    # A memory that holds the whole run (80k transitions, frames stored once: about 600 MB), so that
+    # the high-speed crashes of early training stay in it once the greedy host has slowed down.
+    "r20_memory": R20 + ["learner.replay_frames=true", "learner.buffer_size=80000"],
+    # What the HGM shows (the published grid keeps the paper's): the host visible at every speed
+    # (at 60 km/h, where every host starts, the paper's formula writes the empty cell's 0), a window
+    # reaching 80 m ahead (shedding 26 km/h takes about 57 m; D_r is 40 m), and the enriched variant
+    # (occupancy and host channels), which answers the first too.
+    "r20_host_cell": R20 + ["observation.hgm_host_cell=own_range"],
+    "r20_ahead": R20 + ["observation.hgm_ahead=80"],
+    "r20_enriched": R20 + ["observation.hgm=enriched"],
 }
 
 
