@@ -178,7 +178,9 @@ def _evals_and_episodes(client: MlflowClient, eval_runs: pd.DataFrame,
                 for metric in EVAL_METRICS:
                     if np.isnan(row[metric]) and metric in episodes:
                         row[metric] = float(episodes[metric].mean())
-                if "episode" not in episodes:  # the app writes the index as an `episode` column
+                if "episode.1" in episodes:  # older versions wrote the row index as a first `episode` column
+                    episodes = episodes.drop(columns="episode").rename(columns={"episode.1": "episode"})
+                if "episode" not in episodes:
                     episodes.insert(0, "episode", range(len(episodes)))
                 episodes = episodes.drop(columns=[c for c in ("seed", "scenario", "model", "run_id")
                                                   if c in episodes])

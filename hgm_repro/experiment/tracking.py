@@ -342,8 +342,9 @@ class Tracker:
         # log_model works only through MLflow's fluent (process-global) run; open ours just for it.
         mlflow.set_tracking_uri(self.location.tracking_uri)
         requirements = [f"torch=={torch.__version__.split('+')[0]}", "hgm_repro"]
-        with protected(), mlflow.start_run(run_id=run_id):
-            # pickle: the network class stays ours (pt2 would trace one fixed input shape).
+        with protected(), mlflow.start_run(run_id=run_id), _quiet("mlflow.pytorch"):
+            # pickle: the network class stays ours (pt2 would trace one fixed input shape). MLflow
+            # warns about pickle on every call; the README says what loading it takes.
             retry(mlflow.pytorch.log_model, network.cpu().eval(), name=name, pip_requirements=requirements,
                   serialization_format="pickle")
         # Leaving the fluent run marks it FINISHED: the run's owner sets its real status afterwards.
@@ -472,7 +473,20 @@ class Tracker:
 
     def download(self, run_id: str, artifact_path: str, dst: Path) -> Path:
         dst.mkdir(parents=True, exist_ok=True)
+        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")  # a bar per file is noise in a log
         return Path(retry(self.client.download_artifacts, run_id, artifact_path, str(dst)))
+
+
+@contextmanager
+def _quiet(logger: str) -> Iterator[None]:
+    """Only errors from `logger` while inside (MLflow's per-call warnings and notices)."""
+    target = logging.getLogger(logger)
+    level = target.level
+    target.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        target.setLevel(level)
 
 
 def _create_sqlite_store_atomically(uri: str) -> None:
@@ -493,7 +507,8 @@ def _create_sqlite_store_atomically(uri: str) -> None:
     for stale in db.parent.glob(f".{db.name}.creating-*"):  # what killed creators left (we hold the store lock)
         stale.unlink(missing_ok=True)
     tmp = db.with_name(f".{db.name}.creating-{os.getpid()}")
-    MlflowClient(tracking_uri=f"{prefix}{tmp}").search_experiments(max_results=1)  # runs the migrations
+    with _quiet("mlflow.store.db.utils"), _quiet("alembic"):
+        MlflowClient(tracking_uri=f"{prefix}{tmp}").search_experiments(max_results=1)  # runs the migrations
     os.replace(tmp, db)
 
 

@@ -25,7 +25,14 @@ from tqdm import tqdm
 
 from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
-from ..experiment.checkpoint import BEST_CHECKPOINT, load_checkpoint, recorded_training_config, save_checkpoint
+from ..experiment.checkpoint import (
+    BEST_CHECKPOINT,
+    load_checkpoint,
+    recorded_training_config,
+    save_checkpoint,
+    save_final,
+    weights_only,
+)
 from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
 from ..experiment.schema import JobConfig
 from ..experiment.train_key import train_key
@@ -187,9 +194,7 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         metrics = episode_means(episodes, "val")
         if metrics["val/episode_return"] > best_val:
             best_val = metrics["val/episode_return"]
-            best = checkpoint_state(finished=False)
-            best["replay_buffer"] = None  # the weights are what best.pt is for
-            save_checkpoint(best, best_path)
+            save_checkpoint(weights_only(checkpoint_state(finished=False)), best_path)  # best.pt is for its weights
         metrics["val/best_episode_return"] = best_val
         return metrics
 
@@ -298,5 +303,4 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     if steps_done < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
         warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
     final = checkpoint_state(finished=True)
-    save_checkpoint(final, last_path)
-    return save_checkpoint(final, final_path)
+    return save_final(final, checkpoint_dir)
