@@ -4,6 +4,7 @@ parallel jobs that share a key, and a training killed mid-way that resumes."""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -80,12 +81,14 @@ def check_sweep(launch: Path, trainings: int, evaluations: int) -> list:
     # The parent run: named by its sweep directory, described, and holding the grid's means.
     parent = parents[0]
     assert parent.info.run_name.startswith("sweep ") and "A sweep" in parent.data.tags["mlflow.note.content"]
+    assert re.fullmatch(r"sweep \d{4}-\d\d-\d\d \d\d:\d\d:\d\d", parent.info.run_name)
     grid = {(r.data.tags["model"], r.data.tags["scenario"]) for r in evals}
+    assert parent.data.metrics == {}  # the grid's means are a table in its description
     for model, scenario in grid:
         returns = [r.data.metrics["eval/episode_return"] for r in evals
                    if (r.data.tags["model"], r.data.tags["scenario"]) == (model, scenario)]
-        assert parent.data.metrics[f"grid/{model}/scenario{scenario}/episode_return"] == pytest.approx(
-            sum(returns) / len(returns), rel=1e-5)
+        assert f"| {model} | {scenario} | {len(returns)} | {sum(returns) / len(returns):.4g} |" in \
+            parent.data.tags["mlflow.note.content"]
     for run in evals:
         assert run.info.run_name == (f"{run.data.tags['model']} seed{run.data.tags['seed']} "
                                      f"scenario{run.data.tags['scenario']} eval")

@@ -30,6 +30,7 @@ from .checkpoint import BEST_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchErr
 from .interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
 from .schema import JobConfig, validate
 from .tracking import (
+    CURVES_VIEW,
     PARENT_RUN_ENV,
     StoreError,
     Tracker,
@@ -124,7 +125,8 @@ def run_job(
                 log.info("run %s was left RUNNING by a process that no longer exists: marked KILLED", run_id)
             serve = tracker.ui_command()
             # A sweep says it once, when it starts (`SweepTracking`); a single job here.
-            log.log(logging.INFO if parent_run_id is None else logging.DEBUG, "MLflow runs: %s%s", tracker.ui_url(),
+            level = logging.INFO if parent_run_id is None else logging.DEBUG
+            log.log(level, "MLflow runs: %s ; training curves: %s%s", tracker.ui_url(), tracker.ui_url(CURVES_VIEW),
                     f" (serve the store first: {serve})" if serve else "")
             if launch_overrides is not None and parent_run_id is None:
                 description = launch_description("job", launch_overrides, Path(launch_dir).resolve())

@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import atexit
 import getpass
+import json
 import logging
 import math
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -50,14 +52,37 @@ SOURCE_NAME = "python -m hgm_repro"
 NOTE = "mlflow.note.content"
 # MLflow 3 opens an experiment on its GenAI pages unless told otherwise.
 RUNS_VIEW = "runs?workflowType=machine_learning"
+# Views of the runs page that a link opens (`viewStateShareKey=<name>`): MLflow 3 reads them from
+# the experiment's tags `mlflow.sharedViewState.<name>`, JSON of its search facets and table state
+# (what the UI's "Share" button writes). A search filter with a sort other than the start time
+# lists matching runs flat instead of folded under their launch.
+SHARED_VIEW_TAG = "mlflow.sharedViewState."
+GRID_VIEW, CURVES_VIEW = "grid", "curves"
+_GRID_COLUMNS = ("tags.`model`", "tags.`scenario`", "tags.`seed`", "metrics.`eval/episode_return`",
+                 "metrics.`eval/collisions`", "metrics.`eval/avg_speed_kmh`")
+SHARED_VIEWS: dict[str, dict[str, Any]] = {
+    # Every evaluation a row: model, scenario, seed and its results readable without a click.
+    GRID_VIEW: {"searchFilter": "tags.stage = 'eval'", "orderByKey": "tags.`scenario`", "orderByAsc": True,
+                "selectedColumns": list(_GRID_COLUMNS),
+                "columnOrder": ["attributes.`Run Name`", *_GRID_COLUMNS],
+                "columnWidths": {"attributes.`Run Name`": 230, "tags.`model`": 90, "tags.`scenario`": 80,
+                                 "tags.`seed`": 60, "metrics.`eval/episode_return`": 160,
+                                 "metrics.`eval/collisions`": 130, "metrics.`eval/avg_speed_kmh`": 170}},
+    # The training runs, for the chart view: their train/ and val/ curves.
+    CURVES_VIEW: {"searchFilter": "tags.stage = 'train'", "orderByKey": "tags.`model`", "orderByAsc": True,
+                  "selectedColumns": ["tags.`model`", "tags.`seed`", "metrics.`val/best_episode_return`"],
+                  "hideEmptyCharts": True},
+}
 # What a launch's parent run summarises of its evaluations (means over seeds).
 SUMMARY_METRICS = ("episode_return", "avg_speed_kmh", "collisions")
 EXPERIMENT_DESCRIPTION = (
     "Runs of **hgm_repro**, the reproduction of Bai et al.'s Hyper-Grid Matrix driving-decision paper.\n\n"
     "Every top-level run is one launch of `python -m hgm_repro`: a sweep (`-m`) or a single job. Expand it "
     "to see the runs it made: trainings (tag `stage=train`, in the training traffic) and evaluations "
-    "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's own "
-    "metrics `grid/<model>/scenario<s>/<metric>` are the means over its evaluations.\n\n"
+    "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's "
+    "description ends with the means over seeds of its evaluations.\n\n"
+    "Views: **Views > grid** lists every evaluation with its model, scenario, seed and results; "
+    "**Views > curves** with the chart view shows the training curves. "
     "Figures, tables and the PDF report: `python -m analysis`."
 )
 # What this version of hgm_repro writes into an experiment (tags and names); another value on
@@ -211,16 +236,19 @@ class Tracker:
     def _describe_experiment(self) -> None:
         """The experiment's description, and its kind, so that the UI opens on runs (not GenAI traces)."""
         tags = self.client.get_experiment(self.experiment_id).tags
-        wanted = {NOTE: EXPERIMENT_DESCRIPTION, "mlflow.experimentKind": "custom_model_development"}
+        wanted = {NOTE: EXPERIMENT_DESCRIPTION, "mlflow.experimentKind": "custom_model_development",
+                  **{SHARED_VIEW_TAG + name: json.dumps(view) for name, view in SHARED_VIEWS.items()}}
         for key, value in wanted.items():
             if key not in tags:  # never overwrite what a user wrote in the UI
                 self.client.set_experiment_tag(self.experiment_id, key, value)
 
-    def ui_url(self) -> str:
-        """The address that opens this experiment's runs in the MLflow UI (`mlflow ui` for a local store)."""
+    def ui_url(self, view: str = GRID_VIEW) -> str:
+        """The address that opens this experiment's runs in the MLflow UI (`mlflow ui` for a local
+        store) on one of `SHARED_VIEWS`: the evaluations as a table, or the training curves as charts."""
         uri = self.location.tracking_uri
         base = uri.rstrip("/") if uri.startswith(("http://", "https://")) else "http://127.0.0.1:5000"
-        return f"{base}/#/experiments/{self.experiment_id}/{RUNS_VIEW}"
+        mode = "&compareRunsMode=CHART" if view == CURVES_VIEW else ""
+        return f"{base}/#/experiments/{self.experiment_id}/{RUNS_VIEW}{mode}&viewStateShareKey={view}"
 
     def ui_command(self) -> str | None:
         """The `mlflow ui` command that serves a local store (None for a server)."""
@@ -232,7 +260,7 @@ class Tracker:
 
     def run_link(self, run_id: str, text: str) -> str:
         """A markdown link to a run that works inside the UI (descriptions are rendered there)."""
-        return f"[{text}](#/experiments/{self.experiment_id}/runs/{run_id})"
+        return f"[{text}](#/experiments/{self.experiment_id}/runs/{run_id}?workflowType=machine_learning)"
 
     def __getstate__(self) -> dict[str, Any]:
         # submitit pickles Hydra's callbacks with each job: run locks belong to this process only.
@@ -376,9 +404,10 @@ class Tracker:
         return self.search(f"tags.`mlflow.parentRunId` = '{parent_run_id}'")
 
     def summarise_launch(self, parent_run_id: str, description: str) -> dict[str, float]:
-        """Log the means of a launch's evaluations on its parent run, per model and scenario
-        (`grid/<model>/scenario<s>/<metric>`, over seeds); its description becomes `description`
-        followed by the same means as a markdown table."""
+        """The means over seeds of a launch's evaluations, per model and scenario, as a markdown
+        table after `description` in its parent run's description; returned as
+        `{"<model>/scenario<s>/<metric>": mean}`. Not logged as metrics: one chart per cell would
+        bury the training curves in the UI's chart view."""
         groups: dict[tuple[str, str], list[Any]] = {}
         for run in self.children(parent_run_id):
             tags = run.data.tags
@@ -393,11 +422,10 @@ class Tracker:
                 values = [r.data.metrics[f"eval/{metric}"] for r in runs if f"eval/{metric}" in r.data.metrics]
                 mean = tidy_number(sum(values) / len(values)) if values else float("nan")
                 if values:
-                    summary[f"grid/{model}/{scenario_label(scenario)}/{metric}"] = mean
+                    summary[f"{model}/{scenario_label(scenario)}/{metric}"] = mean
                 cells.append(f"{mean:.4g}")
             rows.append(f"| {model} | {scenario} | {len(runs)} | " + " | ".join(cells) + " |")
         if summary:
-            self.log_metrics(parent_run_id, summary, step=0)
             description += "\n\nMeans over seeds of its evaluations:\n\n" + "\n".join(rows)
         self.describe(parent_run_id, description)
         return summary
@@ -552,6 +580,15 @@ def launch_description(kind: str, overrides: str, where: Path) -> str:
             "runs nested under it.")
 
 
+def _sweep_time(sweep_dir: Path) -> str:
+    """`multirun/2026-12-02/22-11-36` -> `2026-12-02 22:11:36`: Hydra's default sweep directory
+    names the time and its parent the date; another directory is named as it is."""
+    date, time_of_day = sweep_dir.parent.name, sweep_dir.name
+    if re.fullmatch(r"\d{4}-\d\d-\d\d", date) and re.fullmatch(r"\d\d-\d\d-\d\d", time_of_day):
+        return f"{date} {time_of_day.replace('-', ':')}"
+    return sweep_dir.name
+
+
 def _sweep_jobs(config: DictConfig) -> list[Any]:
     """The validated config of every job of a basic-sweeper sweep (other sweepers choose their
     jobs as they go: none). A job whose values do not validate is left out; it reports itself."""
@@ -609,15 +646,17 @@ class SweepTracking(Callback):
         overrides = " ".join(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))
         self._description = launch_description("sweep", overrides, Path(sweep_dir).resolve())
         self._parent = tracker.start_run(
-            f"sweep {Path(sweep_dir).name}",
+            f"sweep {_sweep_time(Path(sweep_dir))}",
             {**launch_tags("sweep", overrides), "sweep_dir": str(Path(sweep_dir).resolve())},
             description=self._description,
         )
         os.environ[PARENT_RUN_ENV] = self._parent
         # A sweep that raises never reaches on_multirun_end: close the parent run anyway.
         atexit.register(self._close, "FAILED")
-        log.info("MLflow parent run %s (%s); runs: %s", self._parent, tracker.location.tracking_uri,
-                 tracker.ui_url())
+        serve = tracker.ui_command()
+        log.info("MLflow parent run %s (%s); evaluations: %s ; training curves: %s%s", self._parent,
+                 tracker.location.tracking_uri, tracker.ui_url(), tracker.ui_url(CURVES_VIEW),
+                 f" (serve the store first: {serve})" if serve else "")
         self._train_grouped(config, tracker)
 
     def _train_grouped(self, config: DictConfig, tracker: Tracker) -> None:
