@@ -37,6 +37,7 @@ class StoreData:
     episodes: pd.DataFrame  # one row per evaluated episode: model, scenario, seed, episode, metrics
     configs: dict[str, str] = field(default_factory=dict)  # model -> resolved config.yaml text
     dropped: list[str] = field(default_factory=list)  # why runs were left out (duplicates, failures)
+    source: str = ""  # how the report names where the data came from; "" = the tracking store
 
     @property
     def git_dirty(self) -> str:
