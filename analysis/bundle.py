@@ -130,7 +130,7 @@ def _restore(raw: pd.Series, dtype: str) -> pd.Series:
     return values
 
 
-def _read_table(directory: Path, name: str, columns: dict[str, str]) -> pd.DataFrame:
+def _read_table(directory: Path, name: str, columns: dict[str, str], rows: int | None = None) -> pd.DataFrame:
     path = directory / name
     if not path.exists():
         raise BundleError(f"the bundle at {directory} lacks {name}, which its {MANIFEST} lists")
@@ -140,6 +140,9 @@ def _read_table(directory: Path, name: str, columns: dict[str, str]) -> pd.DataF
         raise BundleError(f"{path} is damaged ({_first_line(exc)}): write the bundle again") from exc
     if list(frame.columns) != list(columns):
         raise BundleError(f"{path} has columns {list(frame.columns)}, its {MANIFEST} says {list(columns)}")
+    if rows is not None and len(frame) != rows:
+        raise BundleError(f"{path} is damaged: it holds {len(frame)} rows, its {MANIFEST} says {rows} (a truncated "
+                          "copy?); write the bundle again")
     restored = {}
     for column, dtype in columns.items():
         try:
@@ -173,12 +176,13 @@ def load_bundle(directory: Path | str) -> StoreData:
                           f"version {FORMAT_VERSION}: rebuild the bundle from its store with this version, or "
                           "use the analysis of the commit that wrote it")
     try:
-        listed = {field_name: (manifest["tables"][field_name]["file"], manifest["tables"][field_name]["columns"])
+        listed = {field_name: (manifest["tables"][field_name]["file"], manifest["tables"][field_name]["columns"],
+                               manifest["tables"][field_name].get("rows"))
                   for field_name in TABLE_FILES}
     except (KeyError, TypeError) as exc:
         raise BundleError(f"{manifest_path} lacks the entry {_first_line(exc)} of its tables: the bundle is "
                           "damaged; write it again") from exc
-    tables = {field_name: _read_table(directory, name, columns) for field_name, (name, columns) in listed.items()}
+    tables = {field_name: _read_table(directory, *entry) for field_name, entry in listed.items()}
     configs = {}
     for model, name in manifest.get("configs", {}).items():
         try:
