@@ -209,6 +209,7 @@ def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
         pdf.multi_cell(0, 6, SMOKE_BANNER, align="C", fill=True, border=1, padding=3, new_x="LMARGIN",
                        new_y="NEXT")
         pdf.set_text_color(0)
+        pdf.set_fill_color(255)  # tables fill their cells with the current colour
         pdf.set_font("DejaVu", size=10)
         pdf.ln(4)
     pdf.set_font("DejaVu", "B", 10)
