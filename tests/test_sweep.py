@@ -112,9 +112,17 @@ def test_small_parallel_sweep_trains_each_key_once(tmp_path: Path) -> None:
 
 
 def test_smoke_grid_2_models_2_scenarios_2_seeds(tmp_path: Path) -> None:
-    hgm(tmp_path, "-m", "experiment=smoke", "model=proposed,min", "scenario=1,5", "seed=0,1",
-        "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
+    out = hgm(tmp_path, "-m", "experiment=smoke", "model=proposed,min", "scenario=1,5", "seed=0,1",
+              "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
     runs = check_sweep(tmp_path, trainings=4, evaluations=8)
+    # The log says where to look once, and carries no per-job warnings or notices.
+    log = out.stdout + out.stderr
+    assert log.count("viewStateShareKey=grid") == 1, log[-3000:]
+    for noise in ("Pickle", "Initialized LazyTensorStorage", "Creating initial MLflow database"):
+        assert noise not in log, noise
+    # A finished training keeps one full checkpoint (final.pt), and best.pt as weights only.
+    for directory in (tmp_path / "checkpoints").iterdir():
+        assert (directory / "final.pt").is_file() and not (directory / "last.pt").exists(), directory
     evals = by_stage(runs, "eval")
     assert sorted((r.data.tags["model"], r.data.tags["scenario"], r.data.tags["seed"]) for r in evals) == sorted(
         (m, s, seed) for m in ("proposed", "min") for s in ("1", "5") for seed in ("0", "1"))

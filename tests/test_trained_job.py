@@ -87,6 +87,16 @@ def test_watch_a_missing_run_or_file_fails_in_one_line(job, monkeypatch) -> None
         watch(job, monkeypatch, f"run_id={job.train.info.run_id}", "hgm=enriched")
 
 
+def test_watch_checks_its_arguments_before_fetching_anything(tmp_path, monkeypatch) -> None:
+    """`scenario=9` is refused before the store is opened or a checkpoint downloaded."""
+    from hgm_repro.show import main
+
+    monkeypatch.chdir(tmp_path)  # no store here: opening one would fail with another message
+    with pytest.raises(SystemExit, match=r"no scenario '9'"):
+        main(["run_id=abc", "scenario=9"])
+    assert list(tmp_path.iterdir()) == []
+
+
 # --- the network as an MLflow model ------------------------------------------------------------
 
 
@@ -170,4 +180,5 @@ def test_job_log_gives_the_link_that_opens_the_runs(job) -> None:
     url = (f"http://127.0.0.1:5000/#/experiments/{job.experiment.experiment_id}/runs?workflowType=machine_learning"
            "&viewStateShareKey=grid")
     assert url in job.log and "compareRunsMode=CHART&viewStateShareKey=curves" in job.log
+    assert "Pickle" not in job.log and "Initialized LazyTensorStorage" not in job.log  # no per-job noise
     assert f"mlflow ui --backend-store-uri sqlite:///{job.launch}/mlflow.db" in job.log
