@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Integration tests against real services: an MLflow tracking server backed by PostgreSQL, the MLflow
-# UI in a headless browser,
-# both started by the test itself on loopback. Installs what a fresh machine lacks.
+# Integration tests against real services: an MLflow tracking server backed by PostgreSQL, and the
+# MLflow UI in headless Chromium, started by the tests themselves on loopback. Installs what a
+# fresh machine lacks.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
