@@ -362,6 +362,8 @@ def _grid_table(w: ReportWriter, grid: pd.DataFrame) -> None:
 
 def _claims_section(w: ReportWriter, inp: ReportInputs) -> None:
     w.section(SECTION_TITLES[6])
+    if inp.scale:
+        w.para(f"Judged on runs at this scale: {inp.scale}", size=9, italic=True)
     w.para("Each claim is split into signed differences (positive = what the paper says). A difference "
            "supports the claim when its 95 % CI lies above 0, contradicts it when the CI lies below 0, and "
            "is undecided otherwise or with fewer than 3 seeds. A claim needs all its differences to hold; "
@@ -402,6 +404,9 @@ def write_report(inp: ReportInputs, path: Path) -> Path:
     _test_section(w, inp)
     _claims_section(w, inp)
     w.section(SECTION_TITLES[7])
+    if inp.scale:
+        w.para(f"Scale of these runs: {inp.scale} What follows holds at this scale only"
+               + (": these are smoke runs, not a result." if inp.smoke else "."), size=9, italic=True)
     for para in inp.discussion:
         w.para(para)
     _appendix(w, inp)
