@@ -1,9 +1,10 @@
 """`python -m hgm_repro`: one job (or, with -m, a sweep of jobs) of the reproduction.
 
 Kept thin so that `--help` and `--cfg job` answer without importing torch or MLflow;
-the job itself lives in `hgm_repro.experiment.job`. A single run's config is composed and
-validated here first, so that a bad value stops with one line on stderr and exit code 2 before
-Hydra makes its output directory and before any store, run or checkpoint exists.
+the job itself lives in `hgm_repro.experiment.job`. A single run's config, and each job of a
+`-m` grid, is composed and validated here first, so that a bad value or an unknown key stops with
+one line on stderr and exit code 2 before Hydra makes its output directory and before any store,
+run or checkpoint exists.
 """
 
 from __future__ import annotations
