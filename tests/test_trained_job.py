@@ -154,7 +154,7 @@ def test_standard_tags_descriptions_and_nesting(job) -> None:
     assert job.eval.data.tags["mlflow.parentRunId"] == job.parent.info.run_id
     assert "mlflow.parentRunId" not in job.parent.data.tags
     # The evaluation's description links to its training run.
-    link = f"(#/experiments/{job.experiment.experiment_id}/runs/{job.train.info.run_id})"
+    link = f"(#/experiments/{job.experiment.experiment_id}/runs/{job.train.info.run_id}?workflowType=machine_learning)"
     assert link in job.eval.data.tags["mlflow.note.content"]
     assert "mean episode return" in job.eval.data.tags["mlflow.note.content"]
     assert "Hyper-Grid Matrix" in job.experiment.tags["mlflow.note.content"]

@@ -79,8 +79,10 @@ def hydra_job(cfg: DictConfig) -> float | None:
     from hydra.types import RunMode
     from hydra.utils import get_original_cwd
 
-    # TorchRL announces every replay storage it makes at INFO: noise in a job's log.
-    logging.getLogger("torchrl").setLevel(logging.WARNING)
+    # TorchRL announces every replay storage it makes at INFO: noise in a job's log. It sets its
+    # logger's level from RL_LOGGING_LEVEL when first imported, which may be later than this.
+    os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")
+    logging.getLogger("torchrl").setLevel(os.environ["RL_LOGGING_LEVEL"])
     hydra_cfg = HydraConfig.get()
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     # A sweep's parent run is opened by the SweepTracking callback; a single job opens its own.
