@@ -64,13 +64,16 @@ def make_store(launch: Path, seeds: tuple[int, ...] = (0, 1)) -> Tracker:
 def test_the_experiment_carries_the_views_the_links_open(tmp_path: Path) -> None:
     tracker = make_store(tmp_path, seeds=(0,))
     tags = tracker.client.get_experiment(tracker.experiment_id).tags
-    grid = json.loads(tags[SHARED_VIEW_TAG + GRID_VIEW])
+    envelope = json.loads(tags[SHARED_VIEW_TAG + GRID_VIEW])  # what MLflow's Views menu lists
+    assert isinstance(envelope["name"], str) and isinstance(envelope["createdAt"], int)
+    grid = json.loads(envelope["state"])
     assert grid == SHARED_VIEWS[GRID_VIEW] and grid["searchFilter"] == "tags.stage = 'eval'"
     # Sorted by something other than the start time, the filtered runs are listed flat, not folded.
     assert grid["orderByKey"] != "attributes.start_time"
     assert {"tags.`model`", "tags.`scenario`", "tags.`seed`", "metrics.`eval/episode_return`",
             "metrics.`eval/collisions`"} <= set(grid["selectedColumns"])
-    assert json.loads(tags[SHARED_VIEW_TAG + CURVES_VIEW])["searchFilter"] == "tags.stage = 'train'"
+    curves = json.loads(json.loads(tags[SHARED_VIEW_TAG + CURVES_VIEW])["state"])
+    assert curves["searchFilter"] == "tags.stage = 'train'"
     url = tracker.ui_url()
     assert url.endswith(f"/runs?workflowType=machine_learning&viewStateShareKey={GRID_VIEW}")
     assert "compareRunsMode=CHART" in tracker.ui_url(CURVES_VIEW)

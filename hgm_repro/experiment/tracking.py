@@ -52,14 +52,16 @@ SOURCE_NAME = "python -m hgm_repro"
 NOTE = "mlflow.note.content"
 # MLflow 3 opens an experiment on its GenAI pages unless told otherwise.
 RUNS_VIEW = "runs?workflowType=machine_learning"
-# Views of the runs page that a link opens (`viewStateShareKey=<name>`): MLflow 3 reads them from
-# the experiment's tags `mlflow.sharedViewState.<name>`, JSON of its search facets and table state
-# (what the UI's "Share" button writes). A search filter with a sort other than the start time
-# lists matching runs flat instead of folded under their launch.
+# Views of the runs page that a link opens (`viewStateShareKey=<key>`) and the UI's Views menu
+# lists: MLflow 3 reads them from the experiment's tags `mlflow.sharedViewState.<key>`, each an
+# envelope {name, createdAt, updatedAt, state} whose state is the JSON of its search facets and
+# table state (what the UI's own "Save as new view" writes). A search filter with a sort other
+# than the start time lists matching runs flat instead of folded under their launch.
 SHARED_VIEW_TAG = "mlflow.sharedViewState."
 GRID_VIEW, CURVES_VIEW = "grid", "curves"
 _GRID_COLUMNS = ("tags.`model`", "tags.`scenario`", "tags.`seed`", "metrics.`eval/episode_return`",
                  "metrics.`eval/collisions`", "metrics.`eval/avg_speed_kmh`")
+VIEW_NAMES = {"grid": "Evaluations grid", "curves": "Training curves"}
 SHARED_VIEWS: dict[str, dict[str, Any]] = {
     # Every evaluation a row: model, scenario, seed and its results readable without a click.
     GRID_VIEW: {"searchFilter": "tags.stage = 'eval'", "orderByKey": "tags.`scenario`", "orderByAsc": True,
@@ -81,8 +83,8 @@ EXPERIMENT_DESCRIPTION = (
     "to see the runs it made: trainings (tag `stage=train`, in the training traffic) and evaluations "
     "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's "
     "description ends with the means over seeds of its evaluations.\n\n"
-    "Views: **Views > grid** lists every evaluation with its model, scenario, seed and results; "
-    "**Views > curves** with the chart view shows the training curves. "
+    "**Views** holds two views: *Evaluations grid* (every model, scenario and seed with its results) and "
+    "*Training curves* (for the chart view). "
     "Figures, tables and the PDF report: `python -m analysis`."
 )
 # What this version of hgm_repro writes into an experiment (tags and names); another value on
@@ -237,7 +239,7 @@ class Tracker:
         """The experiment's description, and its kind, so that the UI opens on runs (not GenAI traces)."""
         tags = self.client.get_experiment(self.experiment_id).tags
         wanted = {NOTE: EXPERIMENT_DESCRIPTION, "mlflow.experimentKind": "custom_model_development",
-                  **{SHARED_VIEW_TAG + name: json.dumps(view) for name, view in SHARED_VIEWS.items()}}
+                  **{SHARED_VIEW_TAG + key: shared_view(key) for key in SHARED_VIEWS}}
         for key, value in wanted.items():
             if key not in tags:  # never overwrite what a user wrote in the UI
                 self.client.set_experiment_tag(self.experiment_id, key, value)
@@ -503,6 +505,13 @@ class Tracker:
         dst.mkdir(parents=True, exist_ok=True)
         os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")  # a bar per file is noise in a log
         return Path(retry(self.client.download_artifacts, run_id, artifact_path, str(dst)))
+
+
+def shared_view(key: str) -> str:
+    """The experiment tag value of view `key` of `SHARED_VIEWS`, in MLflow's saved-view envelope."""
+    now = int(time.time() * 1000)
+    return json.dumps({"name": VIEW_NAMES[key], "createdAt": now, "updatedAt": now,
+                       "state": json.dumps(SHARED_VIEWS[key])})
 
 
 @contextmanager
