@@ -130,14 +130,31 @@ def _restore(raw: pd.Series, dtype: str) -> pd.Series:
     return values
 
 
-def _read_table(directory: Path, name: str, columns: dict[str, str]) -> pd.DataFrame:
+def _read_table(directory: Path, name: str, columns: dict[str, str], rows: int | None = None) -> pd.DataFrame:
     path = directory / name
     if not path.exists():
         raise BundleError(f"the bundle at {directory} lacks {name}, which its {MANIFEST} lists")
-    frame = pd.read_csv(path, dtype=str, keep_default_na=False)
+    try:
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False)
+    except (ValueError, UnicodeDecodeError) as exc:  # pandas' ParserError and EmptyDataError are ValueErrors
+        raise BundleError(f"{path} is damaged ({_first_line(exc)}): write the bundle again") from exc
     if list(frame.columns) != list(columns):
         raise BundleError(f"{path} has columns {list(frame.columns)}, its {MANIFEST} says {list(columns)}")
-    return pd.DataFrame({c: _restore(frame[c], t) for c, t in columns.items()}, columns=list(columns))
+    if rows is not None and len(frame) != rows:
+        raise BundleError(f"{path} is damaged: it holds {len(frame)} rows, its {MANIFEST} says {rows} (a truncated "
+                          "copy?); write the bundle again")
+    restored = {}
+    for column, dtype in columns.items():
+        try:
+            restored[column] = _restore(frame[column], dtype)
+        except (ValueError, TypeError) as exc:  # a truncated or edited file: a value that is not a `dtype`
+            raise BundleError(f"{path} is damaged: column {column!r} should hold {dtype} values "
+                              f"({_first_line(exc)}); write the bundle again") from exc
+    return pd.DataFrame(restored, columns=list(columns))
+
+
+def _first_line(error: BaseException) -> str:
+    return " ".join(str(error).split())[:160] or type(error).__name__
 
 
 def load_bundle(directory: Path | str) -> StoreData:
@@ -152,16 +169,29 @@ def load_bundle(directory: Path | str) -> StoreData:
     try:
         manifest = json.loads(manifest_path.read_text())
     except ValueError as exc:
-        raise BundleError(f"{manifest_path} is not valid JSON: {exc}") from exc
+        raise BundleError(f"{manifest_path} is not valid JSON: {_first_line(exc)}") from exc
     version = manifest.get("format_version")
     if version != FORMAT_VERSION:
         raise BundleError(f"the bundle at {directory} has format version {version}, this analysis reads format "
                           f"version {FORMAT_VERSION}: rebuild the bundle from its store with this version, or "
                           "use the analysis of the commit that wrote it")
-    tables = {field_name: _read_table(directory, manifest["tables"][field_name]["file"],
-                                      manifest["tables"][field_name]["columns"])
-              for field_name in TABLE_FILES}
-    configs = {model: (directory / name).read_text() for model, name in manifest.get("configs", {}).items()}
+    try:
+        listed = {field_name: (manifest["tables"][field_name]["file"], manifest["tables"][field_name]["columns"],
+                               manifest["tables"][field_name].get("rows"))
+                  for field_name in TABLE_FILES}
+    except (KeyError, TypeError) as exc:
+        raise BundleError(f"{manifest_path} lacks the entry {_first_line(exc)} of its tables: the bundle is "
+                          "damaged; write it again") from exc
+    tables = {field_name: _read_table(directory, *entry) for field_name, entry in listed.items()}
+    configs = {}
+    for model, name in manifest.get("configs", {}).items():
+        try:
+            configs[model] = (directory / name).read_text()
+        except (OSError, UnicodeDecodeError) as exc:
+            raise BundleError(f"{directory / name} cannot be read ({type(exc).__name__}), though its {MANIFEST} "
+                              "lists it: the bundle is damaged; write it again") from exc
+    # The source store's path is the author's machine's: the report names the bundle instead.
+    source = f"results bundle {directory.resolve().name}/ (experiment {manifest.get('experiment')})"
     return StoreData(tracking_uri=manifest["tracking_uri"], experiment=manifest["experiment"], configs=configs,
-                     dropped=list(manifest.get("dropped", [])), **tables)
+                     dropped=list(manifest.get("dropped", [])), source=source, **tables)
 

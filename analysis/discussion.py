@@ -33,25 +33,29 @@ def ordering_agreement(evals: pd.DataFrame) -> tuple[int, int, int, int]:
     return agree, pairs, first, compared
 
 
-def _numbers(results: list[ClaimResult], verdict: str) -> str:
+def _tally(results: list[ClaimResult], verdict: str) -> str:
+    """'one claim (7)', 'four claims (1, 2, 3 and 4)', 'none'."""
     nums = [str(r.number) for r in results if r.verdict == verdict]
-    return ", ".join(nums) if nums else "none"
+    if not nums:
+        return "none"
+    words = ("no", "one", "two", "three", "four", "five", "six", "seven")
+    count = words[len(nums)] if len(nums) < len(words) else str(len(nums))
+    listed = nums[0] if len(nums) == 1 else f"{', '.join(nums[:-1])} and {nums[-1]}"
+    return f"{count} claim{'s' if len(nums) > 1 else ''} ({listed})"
 
 
 def discussion(results: list[ClaimResult], seed_counts: pd.DataFrame, n_train_runs: int,
                evals: pd.DataFrame) -> list[str]:
     """Paragraphs: the overall tally, then what each group of verdicts rests on, then caveats."""
     paras = [
-        f"Of the paper's seven claims, our runs support {sum(r.verdict == SUPPORTED for r in results)} "
-        f"(claims {_numbers(results, SUPPORTED)}), contradict "
-        f"{sum(r.verdict == NOT_SUPPORTED for r in results)} (claims {_numbers(results, NOT_SUPPORTED)}) "
-        f"and leave {sum(r.verdict == INCONCLUSIVE for r in results)} undecided "
-        f"(claims {_numbers(results, INCONCLUSIVE)})."
+        f"Of the paper's seven claims, our runs support {_tally(results, SUPPORTED)}, contradict "
+        f"{_tally(results, NOT_SUPPORTED)} and leave {_tally(results, INCONCLUSIVE)} undecided."
     ]
     for r in results:
         if r.verdict == INCONCLUSIVE:
-            reasons = sorted({c.reason for c in r.comparisons if c.verdict != SUPPORTED})
-            paras.append(f"Claim {r.number} is undecided because: {'; '.join(reasons) or 'no comparisons'}.")
+            open_ = [c.text() for c in r.comparisons if c.verdict != SUPPORTED]
+            paras.append(f"Claim {r.number} is undecided; the comparisons that do not hold yet: "
+                         f"{'; '.join(open_) or 'none were possible (no data)'}.")
         elif r.verdict == NOT_SUPPORTED:
             against = [c for c in r.comparisons if c.verdict == NOT_SUPPORTED]
             paras.append(f"Claim {r.number} fails on: " + "; ".join(c.text() for c in against) + ".")

@@ -73,3 +73,29 @@ def fmt(value: float, metric: str = "", digits: int | None = None) -> str:
         return "n/a"
     d = METRIC_DIGITS.get(metric, 2) if digits is None else digits
     return f"{value:.{d}f}"
+
+
+# What the simulator's parameters mean and their units (conf/simulator/highway.yaml), for the
+# report's tables: the paper's symbols (Table 1) are not self-explanatory.
+VEHICLE_PARAMETERS = {
+    "a_lon": "a_lon: acceleration and braking of one action (m/s^2, eq. 2)",
+    "v_lat": "v_lat: lateral speed of a lane change (m/s, eq. 3)",
+    "r_lon": "r_lon: chance of a random longitudinal action per decision",
+    "r_lat": "r_lat: chance of a random lane change per decision",
+    "connected": "connected: sends V2X messages (appears in the HGM)",
+    "length": "length (m)",
+    "width": "width (m)",
+    "lane_change_time_gap": "lane_change_time_gap: smallest gap accepted for a lane change (s)",
+}
+PARAMETER_UNITS = {
+    "lane_width": "m", "v_min_kmh": "km/h", "v_max_kmh": "km/h", "decision_dt": "s", "physics_dt": "s",
+    "episode_seconds": "s", "window_behind": "m", "window_ahead": "m", "density_per_km_per_lane": "veh/km/lane",
+    "host_start_speed_kmh": "km/h", "safety.reaction_time": "s", "safety.emergency_decel": "m/s^2",
+    "safety.min_gap": "m", "reward.dangerous_time_gap": "s",
+}
+
+
+def parameter_label(key: str) -> str:
+    """`lane_width` -> `lane_width (m)`; keys without a unit stay as they are."""
+    unit = PARAMETER_UNITS.get(key)
+    return f"{key} ({unit})" if unit else key

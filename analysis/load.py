@@ -37,6 +37,7 @@ class StoreData:
     episodes: pd.DataFrame  # one row per evaluated episode: model, scenario, seed, episode, metrics
     configs: dict[str, str] = field(default_factory=dict)  # model -> resolved config.yaml text
     dropped: list[str] = field(default_factory=list)  # why runs were left out (duplicates, failures)
+    source: str = ""  # how the report names where the data came from; "" = the tracking store
 
     @property
     def git_dirty(self) -> str:
@@ -178,7 +179,9 @@ def _evals_and_episodes(client: MlflowClient, eval_runs: pd.DataFrame,
                 for metric in EVAL_METRICS:
                     if np.isnan(row[metric]) and metric in episodes:
                         row[metric] = float(episodes[metric].mean())
-                if "episode" not in episodes:  # the app writes the index as an `episode` column
+                if "episode.1" in episodes:  # older versions wrote the row index as a first `episode` column
+                    episodes = episodes.drop(columns="episode").rename(columns={"episode.1": "episode"})
+                if "episode" not in episodes:
                     episodes.insert(0, "episode", range(len(episodes)))
                 episodes = episodes.drop(columns=[c for c in ("seed", "scenario", "model", "run_id")
                                                   if c in episodes])

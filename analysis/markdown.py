@@ -5,14 +5,13 @@ curves, configs, every metric)."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any
 
 import pandas as pd
-import yaml
 
 from analysis.claims import ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
 from analysis.report import fmt_estimate
+from analysis.scale import is_smoke, scale_text
 from analysis.tables import PAPER_TABLE6
 
 # The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
@@ -41,40 +40,22 @@ def _grid(summary: pd.DataFrame, metric: str, scenarios: list[str], paper: bool)
     return lines
 
 
-def scale_text(configs: dict[str, str], evals: pd.DataFrame) -> str:
-    """The scale the numbers were made at, read from the runs' own resolved configs."""
-    text = configs.get("proposed") or next(iter(configs.values()), "")
-    try:
-        config: dict[str, Any] = yaml.safe_load(text) or {}
-    except yaml.YAMLError:
-        config = {}
-    learner, obs = config.get("learner", {}), config.get("observation", {})
-    parts = []
-    if learner:
-        parts.append(f"preset `{config.get('experiment', {}).get('name', '?')}`: {learner.get('total_steps', 0):,} "
-                     f"training steps per seed (paper 1,000,000), images {obs.get('height')}x{obs.get('width')} "
-                     f"with {obs.get('frame_stack')} frames (paper 84x84, 4)")
-        parts.append(f"tested with the `{config.get('eval', {}).get('checkpoint', 'final')}` checkpoint")
-    if "n_episodes" in evals and not evals.empty:
-        episodes = sorted({int(n) for n in evals["n_episodes"].dropna()})
-        parts.append(f"{'/'.join(map(str, episodes))} complete test episodes per cell (paper: 200,000 decisions, "
-                     "about 834 episodes)")
-    return "; ".join(parts) + "." if parts else "scale unknown: the runs logged no config."
-
-
 def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
                      evals: pd.DataFrame, commits: list[str], figures: dict[str, dict[str, Path]],
                      out_dir: Path) -> str:
     """The Markdown text; figure links are relative to `out_dir`, where results.md is written."""
     scenarios = [s for s in SCENARIOS if s in set(summary["scenario"])] \
         or sorted(set(summary["scenario"]))
-    lines = ["# Results", "", f"Scale: {scale_text(configs, evals)}",
+    banner = ["**Smoke run: not a result.** The `smoke` preset trains for seconds to prove that the pipeline "
+              "runs; its numbers and verdicts mean nothing.", ""] if is_smoke(configs) else []
+    lines = ["# Results", "", *banner, f"Scale: {scale_text(configs, evals)}",
              f"Runs from commit{'s' if len(commits) != 1 else ''} {', '.join(c[:10] for c in commits) or 'unknown'}. "
              "Cells: mean over seeds [95% bootstrap CI over seeds].", "",
              "## Test return per episode (the paper's Table 6; its numbers in parentheses)", "",
              *_grid(summary, "episode_return", scenarios, paper=True), "",
-             "The paper does not say what its test score sums; ours is the mean return of a complete "
-             "240-decision episode under Table 2's rewards, so only the order of the methods compares.", ""]
+             "The paper does not say what its test score sums; ours is the mean return of a test episode under "
+             "Table 2's rewards (an episode ends at its time limit or at the host's first collision), so only the "
+             "order of the methods compares.", ""]
     for metric in SIDE_METRICS:
         if metric in set(summary["metric"]):
             lines += [f"## {METRIC_LABELS[metric]}", "",

@@ -20,6 +20,7 @@ from analysis.load import EVAL_METRICS, StoreData
 from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import ReportInputs, fmt_estimate, write_report
+from analysis.scale import is_smoke, scale_text
 from analysis.stats import mean_ci
 from hgm_repro.experiment.config_tree import flatten
 
@@ -140,11 +141,36 @@ def _coverage_notes(data: StoreData) -> list[str]:
             notes.append(f"{model_label(model)} has evaluation runs but no training curves in the store.")
     if len(data.git_commits) > 1:
         notes.append(f"The runs come from {len(data.git_commits)} different git commits.")
-    keys = data.runs.loc[data.runs["stage"] == "train", "train_key"].dropna().unique()
-    if len(keys) > len(set(data.runs.loc[data.runs["stage"] == "train", "model"])):
-        notes.append("Some method has training runs with more than one train_key (different training configs); "
-                     "the latest run per method and seed is used.")
+    mixed = _models_with_several_training_configs(data.runs)
+    if mixed:
+        notes.append(f"{', '.join(model_label(m, True) for m in mixed)}: one seed has training runs with more than "
+                     "one train_key (different training configs); the latest run per method and seed is used.")
     return notes
+
+
+def _models_with_several_training_configs(runs: pd.DataFrame) -> list[str]:
+    """Models where one seed was trained under more than one train_key. A train_key includes the
+    seed, so seeds alone give a model several keys: only two keys for one seed are worth a note."""
+    train = runs[runs["stage"] == "train"].dropna(subset=["train_key"])
+    if train.empty:
+        return []
+    keys = train.groupby(["model", "seed"])["train_key"].nunique()
+    return ordered_models(keys[keys > 1].reset_index()["model"])
+
+
+def _config_runs(configs: dict[str, str]) -> dict[str, str]:
+    """Which run each model's printed config is from (the report prints one per model)."""
+    out = {}
+    for model, text in configs.items():
+        try:
+            config = yaml.safe_load(text) or {}
+        except yaml.YAMLError:
+            continue
+        scenario, seed = config.get("scenario", {}).get("name"), config.get("seed")
+        if scenario is not None and seed is not None:
+            out[model] = (f"of one evaluation run, scenario {scenario}, seed {seed}; its other runs differ in "
+                          "scenario and seed only")
+    return out
 
 
 def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outputs:
@@ -186,7 +212,9 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         claims=results, discussion=discussion(results, counts, len(train_runs), evals),
         configs=_config_texts(data.configs),
         git_dirty=data.git_dirty,
-        train_keys=sorted(str(k) for k in data.runs["train_key"].dropna().unique()),
+        train_keys=sorted(str(k) for k in train_runs["train_key"].dropna().unique()),
+        scale=scale_text(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
+        config_runs=_config_runs(data.configs),
     )
     markdown = out_dir / "results.md"
     markdown.write_text(results_markdown(summary, results, data.configs, evals, data.git_commits, figures, out_dir))

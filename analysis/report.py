@@ -13,8 +13,8 @@ from fpdf import FPDF
 from fpdf.fonts import FontFace
 from PIL import Image
 
-from analysis.claims import NOT_SUPPORTED, SUPPORTED, ClaimResult
-from analysis.labels import CV_RATIO, METRIC_LABELS, fmt, model_label
+from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
+from analysis.labels import CV_RATIO, METRIC_LABELS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
 
 # matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
 # latin-1 core fonts.
@@ -46,16 +46,27 @@ class ReportInputs:
     claims: list[ClaimResult]
     discussion: list[str]
     configs: dict[str, str]  # model -> resolved config text (or a diff against the first)
-    train_keys: list[str] = field(default_factory=list)
+    train_keys: list[str] = field(default_factory=list)  # of the training runs
     git_dirty: str = ""  # "true"/"false"/"mixed" from the runs' git_dirty tags
+    scale: str = ""  # preset, steps, images, checkpoint, episodes per cell, beside the paper's
+    smoke: bool = False  # made with the smoke preset: not a result
+    source: str = ""  # where the data came from, as the cover names it (no machine path for a bundle)
+    config_runs: dict[str, str] = field(default_factory=dict)  # model -> which run its config is from
+
+
+SMOKE_BANNER = ("SMOKE RUN: NOT A RESULT. The smoke preset trains for a few hundred steps to prove that the "
+                "pipeline runs end to end; its numbers, figures and verdicts say nothing about the paper.")
 
 
 class _Pdf(FPDF):
+    smoke = False
+
     def footer(self) -> None:
         self.set_y(-12)
         self.set_font("DejaVu", size=8)
-        self.set_text_color(120)
-        self.cell(0, 6, f"hgm_repro reproduction report  -  page {self.page_no()}", align="C")
+        self.set_text_color(*((200, 30, 30) if self.smoke else (120, 120, 120)))
+        what = "smoke run: not a result" if self.smoke else "hgm_repro reproduction report"
+        self.cell(0, 6, f"{what}  -  page {self.page_no()}", align="C")
         self.set_text_color(0)
 
 
@@ -169,32 +180,57 @@ class ReportWriter:
         return path
 
 
+def claim_numbers(claims: Sequence[ClaimResult], verdict: str) -> str:
+    """'claims 1, 2 and 4', 'claim 7' or 'none': the numbers, never a count."""
+    numbers = [str(r.number) for r in claims if r.verdict == verdict]
+    if not numbers:
+        return "none"
+    if len(numbers) == 1:
+        return f"claim {numbers[0]}"
+    return f"claims {', '.join(numbers[:-1])} and {numbers[-1]}"
+
+
 def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
     pdf = w.pdf
     pdf.add_page()
-    pdf.ln(35)
+    pdf.ln(20 if inp.smoke else 30)
     pdf.set_font("DejaVu", "B", 20)
-    pdf.multi_cell(0, 10, "Reproduction report", align="C", new_x="LMARGIN", new_y="NEXT")
+    pdf.multi_cell(0, 10, "Reproduction report" + (" (smoke run)" if inp.smoke else ""), align="C",
+                   new_x="LMARGIN", new_y="NEXT")
     pdf.set_font("DejaVu", "", 13)
     pdf.multi_cell(0, 7, "Deep RL driving decisions in heterogeneous highway traffic with a Hyper-Grid "
                          "Matrix (Bai et al.): our runs against the paper's claims", align="C",
                    new_x="LMARGIN", new_y="NEXT")
-    pdf.ln(12)
-    verdicts = {r.number: r.verdict for r in inp.claims}
+    pdf.ln(6)
+    if inp.smoke:
+        pdf.set_fill_color(253, 226, 226)
+        pdf.set_text_color(170, 20, 20)
+        pdf.set_font("DejaVu", "B", 11)
+        pdf.multi_cell(0, 6, SMOKE_BANNER, align="C", fill=True, border=1, padding=3, new_x="LMARGIN",
+                       new_y="NEXT")
+        pdf.set_text_color(0)
+        pdf.set_fill_color(255)  # tables fill their cells with the current colour
+        pdf.set_font("DejaVu", size=10)
+        pdf.ln(4)
+    pdf.set_font("DejaVu", "B", 10)
+    pdf.multi_cell(0, 5.5, "Scale of these runs", new_x="LMARGIN", new_y="NEXT")
+    w.para(f"{inp.scale} Every verdict below holds at this scale only.", size=9.5)
     info = [
         ["Generated", dt.datetime.now().strftime("%Y-%m-%d %H:%M")],
-        ["Tracking store", inp.tracking_uri],
+        ["Data", inp.source or inp.tracking_uri],
         ["Experiment", inp.experiment],
         ["Git commit(s) of the runs", "\n".join(inp.git_commits) or "not recorded"],
         ["Uncommitted changes (git_dirty)", inp.git_dirty or "not recorded"],
-        ["Training configurations (train_key)", "\n".join(inp.train_keys) or "none"],
-        ["Claims supported", ", ".join(str(k) for k, v in verdicts.items() if v == SUPPORTED) or "none"],
-        ["Claims not supported", ", ".join(str(k) for k, v in verdicts.items() if v == NOT_SUPPORTED) or "none"],
+        ["Training configurations", f"{len(inp.train_keys)} train_keys of the learned models' training runs "
+                                    "(listed in the appendix)" if inp.train_keys else "no training runs"],
+        ["Supported", claim_numbers(inp.claims, SUPPORTED)],
+        ["Not supported", claim_numbers(inp.claims, NOT_SUPPORTED)],
+        ["Inconclusive", claim_numbers(inp.claims, INCONCLUSIVE)],
     ]
     w.table(info, col_widths=[1.0, 2.2], size=9, align="LEFT", headings=False)
-    w.para("Every interval in this report is a 95 % percentile bootstrap over seeds (runs), stratified by "
-           "scenario; episodes inside one run are never treated as independent replications.", size=9,
-           italic=True)
+    w.para("The paper's seven claims are listed by number above and stated in section 7. Every interval in "
+           "this report is a 95 % percentile bootstrap over seeds (runs), stratified by scenario; episodes "
+           "inside one run are never treated as independent replications.", size=9, italic=True)
     pdf.add_page()
     pdf.insert_toc_placeholder(_toc, pages=1)
 
@@ -236,15 +272,21 @@ def _environment_section(w: ReportWriter, inp: ReportInputs) -> None:
     w.para(f"Simulator parameters ({inp.env_source}).", size=9)
     half = (len(inp.env_scalars) + 1) // 2
     left, right = inp.env_scalars[:half], inp.env_scalars[half:]
-    rows = [["Parameter", "Value", "Parameter", "Value"]]
+    rows = [["Parameter (unit)", "Value", "Parameter (unit)", "Value"]]
     for i in range(half):
         r = right[i] if i < len(right) else ("", "")
-        rows.append([left[i][0], left[i][1], r[0], r[1]])
+        rows.append([parameter_label(left[i][0]), left[i][1], parameter_label(r[0]) if r[0] else "", r[1]])
     if inp.env_scalars:
         w.table(rows, col_widths=[2.2, 1.0, 2.2, 1.0], size=7.5)
     if inp.vehicle_types is not None and not inp.vehicle_types.empty:
         w.heading("Vehicle types (paper Table 1 plus the sizes and gaps it leaves open)")
-        w.frame_table(inp.vehicle_types, "Type", size=7.5, first_width=0.8)
+        w.para("HV: the host; CHV / AHV: conservative / aggressive human-driven vehicles; NCV: connected "
+               "vehicles.", size=8.5)
+        # One row per parameter, with its meaning and unit: parameter names as column headings
+        # would be split mid-word.
+        types = inp.vehicle_types.T
+        types.index = [VEHICLE_PARAMETERS.get(str(k), str(k)) for k in types.index]
+        w.frame_table(types, "Parameter", size=7.5, first_width=3.2)
     w.heading("Test scenarios (paper Table 5)")
     rows = [["Scenario", *CV_RATIO.keys()], ["CV ratio", *[f"{v:.2f}" for v in CV_RATIO.values()]],
             ["AHV ratio", *[f"{(1 - v) / 2:.3f}" for v in CV_RATIO.values()]],
@@ -320,6 +362,8 @@ def _grid_table(w: ReportWriter, grid: pd.DataFrame) -> None:
 
 def _claims_section(w: ReportWriter, inp: ReportInputs) -> None:
     w.section(SECTION_TITLES[6])
+    if inp.scale:
+        w.para(f"Judged on runs at this scale: {inp.scale}", size=9, italic=True)
     w.para("Each claim is split into signed differences (positive = what the paper says). A difference "
            "supports the claim when its 95 % CI lies above 0, contradicts it when the CI lies below 0, and "
            "is undecided otherwise or with fewer than 3 seeds. A claim needs all its differences to hold; "
@@ -335,8 +379,12 @@ def _appendix(w: ReportWriter, inp: ReportInputs) -> None:
     w.para("Git commit(s) recorded on the runs used: " + (", ".join(inp.git_commits) or "none recorded") + ".")
     if not inp.configs:
         w.para("No resolved config.yaml artifact was found on the evaluation runs.")
+    if inp.train_keys:
+        w.para("Training configurations (train_key of each training run): " + ", ".join(inp.train_keys) + ".",
+               size=8.5)
     for model, text in inp.configs.items():
-        w.heading(f"Resolved configuration: {model_label(model)}")
+        which = inp.config_runs.get(model)
+        w.heading(f"Resolved configuration: {model_label(model)}" + (f" ({which})" if which else ""))
         w.pdf.set_font("DejaVuMono", size=6.5)
         w.pdf.multi_cell(0, 3.0, text, align="L", new_x="LMARGIN", new_y="NEXT")
         w.pdf.set_font("DejaVu", size=10)
@@ -346,6 +394,7 @@ def _appendix(w: ReportWriter, inp: ReportInputs) -> None:
 def write_report(inp: ReportInputs, path: Path) -> Path:
     """Write the whole report to `path`."""
     w = ReportWriter()
+    w.pdf.smoke = inp.smoke
     _title_page(w, inp)
     _data_section(w, inp)
     _environment_section(w, inp)
@@ -355,6 +404,9 @@ def write_report(inp: ReportInputs, path: Path) -> Path:
     _test_section(w, inp)
     _claims_section(w, inp)
     w.section(SECTION_TITLES[7])
+    if inp.scale:
+        w.para(f"Scale of these runs: {inp.scale} What follows holds at this scale only"
+               + (": these are smoke runs, not a result." if inp.smoke else "."), size=9, italic=True)
     for para in inp.discussion:
         w.para(para)
     _appendix(w, inp)

@@ -172,19 +172,20 @@ def watch(args: dict[str, str]) -> Path:
     from hgm_repro.experiment.schema import validate
     from hgm_repro.simulator.config import ConfigError
 
+    scenario = _scenario_node(args["scenario"])  # the arguments first: nothing is fetched for a bad one
+    fmt = args["format"]
+    if fmt == "auto":
+        fmt = "mp4" if importlib.util.find_spec("imageio_ffmpeg") is not None else "gif"
+    if fmt not in ("gif", "mp4"):
+        raise WatchError(f"format={fmt!r}: use gif, mp4 or auto")
     if args["run_id"]:
         cfg, checkpoint = _from_run(args["run_id"], args["tracking_uri"])
     else:
         checkpoint = Path(args["checkpoint"])
         cfg = _from_checkpoint(checkpoint, args["model"])
     with open_dict(cfg):
-        cfg.scenario = _scenario_node(args["scenario"])
+        cfg.scenario = scenario
         cfg.device = args["device"]
-    fmt = args["format"]
-    if fmt == "auto":
-        fmt = "mp4" if importlib.util.find_spec("imageio_ffmpeg") is not None else "gif"
-    if fmt not in ("gif", "mp4"):
-        raise WatchError(f"format={fmt!r}: use gif, mp4 or auto")
     out = Path(args["out"]) / (f"watch_{cfg.model.name}_seed{cfg.seed}_scenario{args['scenario']}"
                                f"_traffic{args['seed']}.{fmt}")
     try:

@@ -29,7 +29,7 @@ def sizes(transitions: int, overrides: list[str]) -> dict[str, float]:
         job = validate(compose("config", overrides=[*overrides, f"learner.buffer_size={transitions}"]))
     n_envs = job.learner.n_envs
     env = make_env(job, job.train_scenario, n_envs=n_envs, seed=0)
-    flat_buffer, framed = make_replay_buffer(job.learner, torch.device("cpu")), None
+    flat_buffer = make_replay_buffer(job.learner, torch.device("cpu"))
     framed = FrameReplay.for_env(make_replay_buffer(job.learner, torch.device("cpu")), env, job.learner.n_step)
     flat_steps, frame_steps = NStepReturns(job.learner.n_step, 0.99), NStepReturns(job.learner.n_step, 0.99)
     td = env.reset()
@@ -48,7 +48,8 @@ def sizes(transitions: int, overrides: list[str]) -> dict[str, float]:
     rings = sum(t.numel() * t.element_size() for t in framed.frames.values())
     return {"transitions": transitions, "flat_MiB": round(flat_one * transitions / mib),
             "frames_MiB": round((rings + record_one * transitions) / mib),
-            "flat_bytes_per_transition": flat_one, "frame_record_bytes": record_one, "frame_ring_MiB": round(rings / mib)}
+            "flat_bytes_per_transition": flat_one, "frame_record_bytes": record_one,
+            "frame_ring_MiB": round(rings / mib)}
 
 
 def main() -> None:

@@ -60,7 +60,7 @@ def test_numeric_group_choices_are_quoted_for_hydra() -> None:
         ("scenario=7", ["scenario=7 is not allowed: expected one of 1, 2, 3, 4, 5, train"]),
         ("model=nope", ["model=nope is not allowed", "proposed", "idm_mobil"]),
         ("experiment=nope", ["experiment=nope is not allowed", "smoke", "paper"]),
-        ("learner.nope=1", ["learner.nope", "not in struct"]),
+        ("learner.nope=1", ["learner.nope is not a config key"]),
         ("learner.lr=-1", ["learner.lr=-1 is not allowed: must be > 0"]),
         ("learner.batch_size=abc", ["learner.batch_size='abc' is not allowed: expected an integer"]),
         ("seed=-3", ["seed=-3 is not allowed"]),
@@ -80,6 +80,10 @@ def test_bad_value_stops_before_any_work(tmp_path: Path, override: str, expected
 @pytest.mark.parametrize(("override", "says"), [
     ("scenario=7", "scenario=7 is not allowed: expected one of 1, 2, 3, 4, 5, train"),
     ("learner.lr=-1", "learner.lr=-1 is not allowed: must be > 0"),
+    # A mistyped key, plain or added with +, is refused with the nearest key that exists.
+    ("learner.lrr=0.1", "learner.lrr is not a config key; did you mean learner.lr?"),
+    ("+learner.lrr=0.1", "learner.lrr is not a config key; did you mean learner.lr?"),
+    ("scenaro=3", "scenaro is not a config key; did you mean scenario?"),
     ("tracking.uri=foo://bar", "tracking.uri='foo://bar' is not allowed: MLflow stores runs only under the schemes "
                                "sqlite, file, http, https, postgresql"),
 ])
@@ -101,6 +105,20 @@ def test_bad_value_in_a_sweep_launches_nothing(tmp_path: Path) -> None:
     assert out.returncode == 2
     assert "learner.lr=-1 is not allowed" in out.stderr and "nothing was launched" in out.stderr
     assert "Launching" not in out.stdout + out.stderr and not (tmp_path / "mlflow.db").exists()
+
+
+@pytest.mark.parametrize(("sweep", "says"), [
+    ("scenario=1,9", "scenario=9 is not allowed: expected one of 1, 2, 3, 4, 5, train"),
+    ("learner.lr=0.1,-1", "learner.lr=-1 is not allowed: must be > 0"),
+    ("learner.lrr=0.1,0.2", "learner.lrr is not a config key; did you mean learner.lr?"),
+])
+def test_bad_swept_value_is_one_line_and_leaves_no_file(tmp_path: Path, sweep: str, says: str) -> None:
+    """A value bad in one job of the sweep stops it before Hydra starts: no store, no directory."""
+    out = hgm(tmp_path, "-m", "experiment=smoke", sweep, "seed=0,1")
+    assert out.returncode == 2, out.stderr
+    lines = [line for line in out.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and says in lines[0] and lines[0].endswith("nothing was launched"), out.stderr
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_launcher_presets_compose(tmp_path: Path) -> None:

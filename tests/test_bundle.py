@@ -133,3 +133,19 @@ def test_no_report_needs_a_bundle_to_write() -> None:
     with pytest.raises(SystemExit) as exit_:
         main(["--no-report"])
     assert exit_.value.code == 2
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garble"])
+def test_damaged_bundle_gets_one_line_naming_the_file(tmp_path: Path, damage: str,
+                                                      capsys: pytest.CaptureFixture[str]) -> None:
+    write_bundle(awkward_data(), tmp_path)
+    evals = tmp_path / "evals.csv"
+    text = evals.read_text()
+    if damage == "truncate":  # cut in the middle of a row, as an interrupted copy leaves it
+        evals.write_text(text[: len(text) // 2 + 3])
+    else:
+        evals.write_text(text.replace(",0,", ",zero,", 1))
+    assert main(["--bundle", str(tmp_path), "--no-pictures"]) == 1
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and str(evals) in lines[0] and "Traceback" not in err, err

@@ -55,6 +55,16 @@ def test_report_from_a_real_smoke_sweep(swept: Path, store_report: Path) -> None
     for name in ("fig5_speed", "fig_test_results"):
         assert image_variance(out / f"{name}.png") > 0
     assert "1 seed" in text  # one seed: the report says there is no interval instead of inventing one
+    # Page 1: a smoke run says it is not a result, and states its scale beside the paper's; the
+    # claims are listed by number in three groups.
+    first = " ".join((PdfReader(str(out / "report.pdf")).pages[0].extract_text() or "").split())
+    for needed in ("SMOKE RUN: NOT A RESULT", "Scale of these runs", "preset `smoke`: 256 training steps per seed "
+                   "(paper 1,000,000), images 36x36 with 2 frames (paper 84x84, 4)", "checkpoint (paper: the final "
+                   "network)", "test episodes per cell (paper: 200,000 decisions", "Supported", "Not supported",
+                   "Inconclusive"):
+        assert needed in first, (needed, first)
+    assert re.search(r"Inconclusive (claims? [\d, and]+|none)", first), first
+    assert "Smoke run: not a result" in (out / "results.md").read_text()
     # results.md: Table 6 beside the paper's numbers, the side metrics, each claim with its verdict.
     markdown = (out / "results.md").read_text()
     for needed in ("(paper 1927)", "(paper 1969)", "| Human |", "## Collisions per episode", "preset `smoke`",
@@ -83,7 +93,12 @@ def test_report_from_a_bundle_of_the_real_sweep(swept: Path, store_report: Path)
     assert "episode_return" in (out / "test_summary.csv").read_text()
 
     def undated(text: str) -> str:
-        return re.sub(r"Generated \d{4}-\d\d-\d\d \d\d:\d\d", "Generated", text)
+        text = re.sub(r"Generated \d{4}-\d\d-\d\d \d\d:\d\d", "Generated", text)
+        return re.sub(r"Data .*? Experiment ", "Data Experiment ", text)  # the store's path, or the bundle's name
 
-    assert undated(_pdf_text(out / "report.pdf")) == undated(_pdf_text(store_report / "report.pdf"))
+    bundle_text = _pdf_text(out / "report.pdf")
+    assert undated(bundle_text) == undated(_pdf_text(store_report / "report.pdf"))
+    # Built from a bundle, the report names the bundle, never the machine the store was on.
+    assert "Data results bundle bundle/" in bundle_text
+    assert str(swept) not in bundle_text and "sqlite:" not in bundle_text
     assert image_variance(out / "fig5_speed.png") > 0

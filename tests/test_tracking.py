@@ -413,3 +413,44 @@ def test_system_metrics_on_request(launch: Path, monkeypatch: pytest.MonkeyPatch
     off = run_job(make_cfg("tracking.system_metrics=false", "seed=3"), launch, train_fn=FakeLearner(),
                   evaluate_fn=fake_evaluate)
     assert not any(k.startswith("system/") for k in store(launch).get_run(off.training.run_id).data.metrics)
+
+
+class CheckpointLearner(FakeLearner):
+    """Writes real checkpoints: final.pt with an optimiser and a replay memory, best.pt beside it."""
+
+    def __call__(self, job: JobConfig, checkpoint_dir: Path, log) -> Path:
+        import torch
+
+        from hgm_repro.experiment.checkpoint import recorded_training_config, save_checkpoint
+
+        log({"train/epsilon": 0.7750020027160645}, 64)
+        state = {"format": 1, "model": job.model.name, "train_key": train_key(job), "finished": True,
+                 "training_config": recorded_training_config(job), "network": {"w": torch.ones(3)},
+                 "optimizer": {"m": torch.ones(1000)}, "replay_buffer": {"obs": torch.ones(100_000)}}
+        save_checkpoint({**state, "replay_buffer": None}, checkpoint_dir / "best.pt")
+        return save_checkpoint(state, checkpoint_dir / "final.pt")
+
+
+def test_artifacts_hold_weights_and_episodes_csv_is_plain(launch: Path) -> None:
+    """The logged checkpoints are the weights only (the replay memory stays in the local final.pt);
+    episodes.csv has one column per name and numbers as people write them; epsilon has no tail."""
+    import torch
+
+    def evaluate(job, scenario, checkpoint):
+        episodes = pd.DataFrame({"env": [0, 1], "episode": [0, 0], "avg_speed_kmh": [75.400024, 60.0],
+                                 "collisions": [1.0, 0.0], "episode_return": [17.745522, -1.2023659]})
+        return SimpleNamespace(episodes=episodes, means={"eval/episode_return": 8.27})
+
+    out = run_job(make_cfg(), launch, train_fn=CheckpointLearner(), evaluate_fn=evaluate)
+    tracker = store(launch)
+    fetched = tracker.download(out.training.run_id, "checkpoint", launch / "fetched")
+    for name in ("final.pt", "best.pt"):
+        artifact = torch.load(fetched / name, weights_only=False)
+        assert "network" in artifact and "replay_buffer" not in artifact and "optimizer" not in artifact
+    local = torch.load(out.training.checkpoint, weights_only=False)
+    assert local["replay_buffer"] is not None  # what a longer training would resume from: kept once, here
+    history = tracker.client.get_metric_history(out.training.run_id, "train/epsilon")
+    assert [m.value for m in history] == [0.775]
+    text = (tracker.download(out.eval_run_id, "episodes.csv", launch / "eps")).read_text().splitlines()
+    assert text[0] == "env,episode,avg_speed_kmh,collisions,episode_return"
+    assert text[1:] == ["0,0,75.4,1,17.7455", "1,0,60.0,0,-1.20237"]

@@ -87,6 +87,16 @@ def test_watch_a_missing_run_or_file_fails_in_one_line(job, monkeypatch) -> None
         watch(job, monkeypatch, f"run_id={job.train.info.run_id}", "hgm=enriched")
 
 
+def test_watch_checks_its_arguments_before_fetching_anything(tmp_path, monkeypatch) -> None:
+    """`scenario=9` is refused before the store is opened or a checkpoint downloaded."""
+    from hgm_repro.show import main
+
+    monkeypatch.chdir(tmp_path)  # no store here: opening one would fail with another message
+    with pytest.raises(SystemExit, match=r"no scenario '9'"):
+        main(["run_id=abc", "scenario=9"])
+    assert list(tmp_path.iterdir()) == []
+
+
 # --- the network as an MLflow model ------------------------------------------------------------
 
 
@@ -144,7 +154,7 @@ def test_standard_tags_descriptions_and_nesting(job) -> None:
     assert job.eval.data.tags["mlflow.parentRunId"] == job.parent.info.run_id
     assert "mlflow.parentRunId" not in job.parent.data.tags
     # The evaluation's description links to its training run.
-    link = f"(#/experiments/{job.experiment.experiment_id}/runs/{job.train.info.run_id})"
+    link = f"(#/experiments/{job.experiment.experiment_id}/runs/{job.train.info.run_id}?workflowType=machine_learning)"
     assert link in job.eval.data.tags["mlflow.note.content"]
     assert "mean episode return" in job.eval.data.tags["mlflow.note.content"]
     assert "Hyper-Grid Matrix" in job.experiment.tags["mlflow.note.content"]
@@ -152,10 +162,11 @@ def test_standard_tags_descriptions_and_nesting(job) -> None:
 
 
 def test_launch_run_summarises_its_evaluations(job) -> None:
-    summary = job.parent.data.metrics
-    assert summary["grid/proposed/scenario3/episode_return"] == job.eval.data.metrics["eval/episode_return"]
-    assert summary["grid/proposed/scenario3/avg_speed_kmh"] == job.eval.data.metrics["eval/avg_speed_kmh"]
-    assert "| proposed | 3 | 1 |" in job.parent.data.tags["mlflow.note.content"]
+    # A table in the description, no metrics: per-cell charts would bury the training curves.
+    assert job.parent.data.metrics == {}
+    means = job.eval.data.metrics
+    assert (f"| proposed | 3 | 1 | {means['eval/episode_return']:.4g} | {means['eval/avg_speed_kmh']:.4g} |"
+            in job.parent.data.tags["mlflow.note.content"])
 
 
 def test_parameter_counts_are_params_and_values_are_tidy(job) -> None:
@@ -166,6 +177,8 @@ def test_parameter_counts_are_params_and_values_are_tidy(job) -> None:
 
 
 def test_job_log_gives_the_link_that_opens_the_runs(job) -> None:
-    url = f"http://127.0.0.1:5000/#/experiments/{job.experiment.experiment_id}/runs?workflowType=machine_learning"
-    assert url in job.log
+    url = (f"http://127.0.0.1:5000/#/experiments/{job.experiment.experiment_id}/runs?workflowType=machine_learning"
+           "&viewStateShareKey=grid")
+    assert url in job.log and "compareRunsMode=CHART&viewStateShareKey=curves" in job.log
+    assert "Pickle" not in job.log and "Initialized LazyTensorStorage" not in job.log  # no per-job noise
     assert f"mlflow ui --backend-store-uri sqlite:///{job.launch}/mlflow.db" in job.log

@@ -40,11 +40,12 @@ def _font(size: int) -> ImageFont.ImageFont | ImageFont.FreeTypeFont:
 
 def render_top_down(sim: HighwaySimulator, env_index: int = 0, behind: float = 60.0, ahead: float = 120.0,
                     px_per_m: float = 6.0, action: int | None = None, v2x_range: float | None = 40.0,
-                    caption: str | None = None) -> np.ndarray:
+                    caption: str | None = None, legend: bool = True) -> np.ndarray:
     """RGB picture [h, w, 3] uint8 of env `env_index`, `behind` m behind the host to `ahead` m ahead.
 
     `action` is the host's last decision (shown in the text strip when given); `v2x_range` shades
-    the band of road within D_r of the host (None hides it); `caption` adds free text to the strip.
+    the band of road within D_r of the host (None hides it); `caption` adds free text to the strip;
+    `legend` adds a strip below the road that says what the colours, dots and band mean.
     """
     if not 0 <= env_index < sim.n_envs:
         raise IndexError(f"env_index={env_index} is outside 0..{sim.n_envs - 1}")
@@ -68,7 +69,8 @@ def render_top_down(sim: HighwaySimulator, env_index: int = 0, behind: float = 6
     out_strip_h = max(18, int(round(3.6 * px_per_m)))
     road_w = cfg.lanes * cfg.lane_width
     out_w = int(round((behind + ahead) * px_per_m))
-    out_h = out_strip_h + int(round((road_w + 2 * SHOULDER_M) * px_per_m))
+    road_h = out_strip_h + int(round((road_w + 2 * SHOULDER_M) * px_per_m))
+    out_h = road_h + (out_strip_h if legend else 0)
     px_per_m = px_per_m * SUPERSAMPLE
     strip_h, width, height = out_strip_h * SUPERSAMPLE, out_w * SUPERSAMPLE, out_h * SUPERSAMPLE
     font = _font(max(11, int(round(2.2 * px_per_m))))
@@ -145,7 +147,36 @@ def render_top_down(sim: HighwaySimulator, env_index: int = 0, behind: float = 6
     if caption:
         parts.append(caption)
     draw.text((6, strip_h / 2), "   |   ".join(parts), fill=TEXT, font=font, anchor="lm")
+    if legend:
+        _legend(draw, road_h * SUPERSAMPLE, width, strip_h, font, px_per_m, v2x_range is not None)
     return np.asarray(img.resize((out_w, out_h), Image.Resampling.LANCZOS), dtype=np.uint8)
+
+
+def _legend(draw: ImageDraw.ImageDraw, top: float, width: float, strip_h: float, font, px_per_m: float,
+            band: bool) -> None:
+    """Below the road: the host's look, the V2X dot, the shaded band; other colours mean nothing."""
+    draw.rectangle([0, top, width, top + strip_h], fill=STRIP)
+    y, box, x = top + strip_h / 2, strip_h * 0.32, 8.0
+
+    def label(text: str) -> None:
+        nonlocal x
+        draw.text((x, y), text, fill=TEXT, font=font, anchor="lm")
+        x += draw.textlength(text, font=font) + 3 * box
+
+    draw.rectangle([x - 2, y - box - 2, x + 2 * box + 2, y + box + 2], fill=HOST_OUTLINE)
+    draw.rectangle([x, y - box, x + 2 * box, y + box], fill=(230, 30, 30))
+    x += 2 * box + 8
+    label("host (red, yellow rim)")
+    r = max(2.0, 0.35 * px_per_m)
+    draw.ellipse([x - r, y - r, x + r, y + r], fill=(255, 255, 255), outline=(0, 0, 0))
+    x += r + 8
+    label("connected: sends V2X")
+    if band:
+        draw.rectangle([x, y - box, x + 3 * box, y + box], fill=tuple(int(0.3 * b + 0.7 * a) for a, b in
+                                                                         zip(ASPHALT, V2X_BAND, strict=True)))
+        x += 3 * box + 8
+        label("V2X range of the host (the HGM's view)")
+    label("other colours: random, one per car")
 
 
 # --- watching a learned host: what it saw, what it chose, and the road ---------------------

@@ -23,6 +23,13 @@ CHECKPOINT_FORMAT = 1
 FINAL_CHECKPOINT = "final.pt"  # the network at the end of training: the paper's protocol tests this one
 BEST_CHECKPOINT = "best.pt"  # the network with the best validation return so far (validation on only)
 EMA_CHECKPOINT = "ema.pt"  # the exponential moving average of the online weights (learner.ema_decay > 0)
+LAST_CHECKPOINT = "last.pt"  # everything a resume needs, while training runs
+
+# What evaluation reads of a checkpoint: the network and the identity `check_compatible` checks.
+# best.pt and the logged artifacts hold only these; the optimiser and the replay memory (most of
+# a finished training's bytes) stay in final.pt alone.
+WEIGHTS_KEYS = ("format", "model", "train_key", "training_config", "finished", "env_steps", "updates",
+                "network", "best_val_return")
 
 # What a network's weights depend on: evaluation needs only these to match.
 ARCHITECTURE_KEYS = ("model.name", "model.network", "model.streams", "observation")
@@ -84,6 +91,30 @@ def save_checkpoint(state: dict[str, Any], path: Path) -> Path:
         os.fsync(file.fileno())  # on disk before the rename makes it the checkpoint
     os.replace(tmp, path)
     return path
+
+
+def weights_only(state: dict[str, Any]) -> dict[str, Any]:
+    """The part of a checkpoint that evaluation loads (see `WEIGHTS_KEYS`)."""
+    return {k: state[k] for k in WEIGHTS_KEYS if k in state}
+
+
+def save_final(state: dict[str, Any], checkpoint_dir: Path) -> Path:
+    """Write a finished training's `final.pt`, then drop `last.pt`, which it supersedes: the full
+    state (replay memory included) is kept once. Killed between the two, `final.pt` already exists
+    and is what a rerun returns."""
+    final = save_checkpoint(state, Path(checkpoint_dir) / FINAL_CHECKPOINT)
+    (Path(checkpoint_dir) / LAST_CHECKPOINT).unlink(missing_ok=True)
+    return final
+
+
+def weights_file(checkpoint: Path, directory: Path) -> Path:
+    """`checkpoint` as a weights-only copy in `directory` (what an artifact needs). A file this
+    version cannot read is returned as it is: evaluating it reports the problem."""
+    try:
+        state = load_checkpoint(checkpoint)
+    except CheckpointMismatchError:
+        return Path(checkpoint)
+    return save_checkpoint(weights_only(state), Path(directory) / Path(checkpoint).name)
 
 
 def load_checkpoint(path: Path, job: JobConfig | None = None, strict: bool = True,

@@ -26,10 +26,11 @@ from omegaconf import DictConfig, OmegaConf
 
 from ..metrics import VALIDATION_RETURN
 from ..simulator.config import ConfigError, ScenarioConfig
-from .checkpoint import BEST_CHECKPOINT, EMA_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchError
+from .checkpoint import BEST_CHECKPOINT, EMA_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchError, weights_file
 from .interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
 from .schema import JobConfig, validate
 from .tracking import (
+    CURVES_VIEW,
     PARENT_RUN_ENV,
     StoreError,
     Tracker,
@@ -39,6 +40,7 @@ from .tracking import (
     launch_tags,
     resolve_location,
     scenario_label,
+    tidy_number,
 )
 from .train_key import evaluation_key, train_key, training_config
 
@@ -48,6 +50,9 @@ TrainFn = Callable[[JobConfig, Path, Callable[[dict[str, float], int], None]], P
 EvaluateFn = Callable[[JobConfig, ScenarioConfig, "Path | None"], Any]
 RUN_ID_FILE = "mlflow_run_id"  # beside the checkpoints: the training run a resume continues
 CHECKPOINT_ARTIFACT = "checkpoint"
+# Linear schedules computed in float32 (epsilon 0.775002 for 0.775): their curves need 4 decimals.
+SCHEDULE_METRICS = ("train/epsilon", "train/beta")
+SCHEDULE_DECIMALS = 4
 BAD_INPUT_EXIT = 2  # a config, store or checkpoint this job cannot use (as for a bad command line)
 
 
@@ -74,6 +79,10 @@ def hydra_job(cfg: DictConfig) -> float | None:
     from hydra.types import RunMode
     from hydra.utils import get_original_cwd
 
+    # TorchRL announces every replay storage it makes at INFO: noise in a job's log. It sets its
+    # logger's level from RL_LOGGING_LEVEL when first imported, which may be later than this.
+    os.environ.setdefault("RL_LOGGING_LEVEL", "WARNING")
+    logging.getLogger("torchrl").setLevel(os.environ["RL_LOGGING_LEVEL"])
     hydra_cfg = HydraConfig.get()
     multirun = hydra_cfg.mode == RunMode.MULTIRUN
     # A sweep's parent run is opened by the SweepTracking callback; a single job opens its own.
@@ -117,7 +126,10 @@ def run_job(
             for run_id in tracker.close_orphans():
                 log.info("run %s was left RUNNING by a process that no longer exists: marked KILLED", run_id)
             serve = tracker.ui_command()
-            log.info("MLflow runs: %s%s", tracker.ui_url(), f" (serve the store first: {serve})" if serve else "")
+            # A sweep says it once, when it starts (`SweepTracking`); a single job here.
+            level = logging.INFO if parent_run_id is None else logging.DEBUG
+            log.log(level, "MLflow runs: %s ; training curves: %s%s", tracker.ui_url(), tracker.ui_url(CURVES_VIEW),
+                    f" (serve the store first: {serve})" if serve else "")
             if launch_overrides is not None and parent_run_id is None:
                 description = launch_description("job", launch_overrides, Path(launch_dir).resolve())
                 launch_run = parent_run_id = tracker.start_run(
@@ -276,7 +288,8 @@ def _open_training(
     tracker.log_text(run_id, _config_yaml(job), "config.yaml")
 
     def log_to_run(metrics: dict[str, float], step: int) -> None:
-        new = {k: v for k, v in metrics.items() if step > logged.get(k, -1)}
+        new = {k: round(v, SCHEDULE_DECIMALS) if k in SCHEDULE_METRICS else v
+               for k, v in metrics.items() if step > logged.get(k, -1)}
         if new:
             tracker.log_metrics(run_id, new, step)
 
@@ -284,11 +297,12 @@ def _open_training(
 
 
 def _log_trained(job: JobConfig, tracker: Tracker, run_id: str, checkpoint: Path) -> None:
-    """A finished training's artifacts: final.pt (and best.pt), the MLflow model, the checkpoint's path."""
-    tracker.log_artifact(run_id, checkpoint, CHECKPOINT_ARTIFACT)
-    for kept in (BEST_CHECKPOINT, EMA_CHECKPOINT):
-        if checkpoint.with_name(kept).is_file():
-            tracker.log_artifact(run_id, checkpoint.with_name(kept), CHECKPOINT_ARTIFACT)
+    """A finished training's artifacts: final.pt (and best.pt, ema.pt) as weights only, the MLflow model,
+    the checkpoint's path. The optimiser and the replay memory stay in the local final.pt alone."""
+    with tempfile.TemporaryDirectory() as tmp:
+        for path in (checkpoint, checkpoint.with_name(BEST_CHECKPOINT), checkpoint.with_name(EMA_CHECKPOINT)):
+            if path.is_file():
+                tracker.log_artifact(run_id, weights_file(path, Path(tmp)), CHECKPOINT_ARTIFACT)
     if job.tracking.log_model:
         import torch
 
@@ -430,7 +444,7 @@ def evaluate_and_log(
         tracker.describe(run_id, description + "\n\n" + _results_sentence(means))
         with tempfile.TemporaryDirectory() as tmp:
             episodes = Path(tmp) / "episodes.csv"
-            result.episodes.to_csv(episodes, index_label="episode")
+            plain_numbers(result.episodes).to_csv(episodes, index=False)
             tracker.log_artifact(run_id, episodes)
             if job.tracking.log_gif:
                 _log_gif(job, checkpoint, tracker, run_id, Path(tmp))
@@ -454,6 +468,22 @@ def _results_sentence(means: dict[str, float]) -> str:
         ("eval/episode_return", "mean episode return"), ("eval/avg_speed_kmh", "speed (km/h)"),
         ("eval/collisions", "collisions per episode"), ("eval/episodes", "episodes")) if key in means]
     return "Results: " + ", ".join(parts) + "." if parts else ""
+
+
+def plain_numbers(frame: Any) -> Any:
+    """A table as people read it: counts as integers, other values without float32 tails
+    (75.400024 -> 75.4), as the logged metrics (`tidy_number`)."""
+    out = frame.copy()
+    for column in out.columns:
+        values = out[column]
+        if values.dtype.kind != "f":
+            continue
+        finite = values.dropna()
+        if len(finite) == len(values) and (finite == finite.round()).all():
+            out[column] = values.astype("int64")
+        else:
+            out[column] = values.map(tidy_number)
+    return out
 
 
 def _config_yaml(job: JobConfig) -> str:

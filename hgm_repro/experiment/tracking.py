@@ -15,9 +15,11 @@ from __future__ import annotations
 
 import atexit
 import getpass
+import json
 import logging
 import math
 import os
+import re
 import socket
 import subprocess
 import sys
@@ -50,14 +52,39 @@ SOURCE_NAME = "python -m hgm_repro"
 NOTE = "mlflow.note.content"
 # MLflow 3 opens an experiment on its GenAI pages unless told otherwise.
 RUNS_VIEW = "runs?workflowType=machine_learning"
+# Views of the runs page that a link opens (`viewStateShareKey=<key>`) and the UI's Views menu
+# lists: MLflow 3 reads them from the experiment's tags `mlflow.sharedViewState.<key>`, each an
+# envelope {name, createdAt, updatedAt, state} whose state is the JSON of its search facets and
+# table state (what the UI's own "Save as new view" writes). A search filter with a sort other
+# than the start time lists matching runs flat instead of folded under their launch.
+SHARED_VIEW_TAG = "mlflow.sharedViewState."
+GRID_VIEW, CURVES_VIEW = "grid", "curves"
+_GRID_COLUMNS = ("tags.`model`", "tags.`scenario`", "tags.`seed`", "metrics.`eval/episode_return`",
+                 "metrics.`eval/collisions`", "metrics.`eval/avg_speed_kmh`")
+VIEW_NAMES = {"grid": "Evaluations grid", "curves": "Training curves"}
+SHARED_VIEWS: dict[str, dict[str, Any]] = {
+    # Every evaluation a row: model, scenario, seed and its results readable without a click.
+    GRID_VIEW: {"searchFilter": "tags.stage = 'eval'", "orderByKey": "tags.`scenario`", "orderByAsc": True,
+                "selectedColumns": list(_GRID_COLUMNS),
+                "columnOrder": ["attributes.`Run Name`", *_GRID_COLUMNS],
+                "columnWidths": {"attributes.`Run Name`": 230, "tags.`model`": 90, "tags.`scenario`": 80,
+                                 "tags.`seed`": 60, "metrics.`eval/episode_return`": 160,
+                                 "metrics.`eval/collisions`": 130, "metrics.`eval/avg_speed_kmh`": 170}},
+    # The training runs, for the chart view: their train/ and val/ curves.
+    CURVES_VIEW: {"searchFilter": "tags.stage = 'train'", "orderByKey": "tags.`model`", "orderByAsc": True,
+                  "selectedColumns": ["tags.`model`", "tags.`seed`", "metrics.`val/best_episode_return`"],
+                  "hideEmptyCharts": True},
+}
 # What a launch's parent run summarises of its evaluations (means over seeds).
 SUMMARY_METRICS = ("episode_return", "avg_speed_kmh", "collisions")
 EXPERIMENT_DESCRIPTION = (
     "Runs of **hgm_repro**, the reproduction of Bai et al.'s Hyper-Grid Matrix driving-decision paper.\n\n"
     "Every top-level run is one launch of `python -m hgm_repro`: a sweep (`-m`) or a single job. Expand it "
     "to see the runs it made: trainings (tag `stage=train`, in the training traffic) and evaluations "
-    "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's own "
-    "metrics `grid/<model>/scenario<s>/<metric>` are the means over its evaluations.\n\n"
+    "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's "
+    "description ends with the means over seeds of its evaluations.\n\n"
+    "**Views** holds two views: *Evaluations grid* (every model, scenario and seed with its results) and "
+    "*Training curves* (for the chart view). "
     "Figures, tables and the PDF report: `python -m analysis`."
 )
 # What this version of hgm_repro writes into an experiment (tags and names); another value on
@@ -211,16 +238,19 @@ class Tracker:
     def _describe_experiment(self) -> None:
         """The experiment's description, and its kind, so that the UI opens on runs (not GenAI traces)."""
         tags = self.client.get_experiment(self.experiment_id).tags
-        wanted = {NOTE: EXPERIMENT_DESCRIPTION, "mlflow.experimentKind": "custom_model_development"}
+        wanted = {NOTE: EXPERIMENT_DESCRIPTION, "mlflow.experimentKind": "custom_model_development",
+                  **{SHARED_VIEW_TAG + key: shared_view(key) for key in SHARED_VIEWS}}
         for key, value in wanted.items():
             if key not in tags:  # never overwrite what a user wrote in the UI
                 self.client.set_experiment_tag(self.experiment_id, key, value)
 
-    def ui_url(self) -> str:
-        """The address that opens this experiment's runs in the MLflow UI (`mlflow ui` for a local store)."""
+    def ui_url(self, view: str = GRID_VIEW) -> str:
+        """The address that opens this experiment's runs in the MLflow UI (`mlflow ui` for a local
+        store) on one of `SHARED_VIEWS`: the evaluations as a table, or the training curves as charts."""
         uri = self.location.tracking_uri
         base = uri.rstrip("/") if uri.startswith(("http://", "https://")) else "http://127.0.0.1:5000"
-        return f"{base}/#/experiments/{self.experiment_id}/{RUNS_VIEW}"
+        mode = "&compareRunsMode=CHART" if view == CURVES_VIEW else ""
+        return f"{base}/#/experiments/{self.experiment_id}/{RUNS_VIEW}{mode}&viewStateShareKey={view}"
 
     def ui_command(self) -> str | None:
         """The `mlflow ui` command that serves a local store (None for a server)."""
@@ -232,7 +262,7 @@ class Tracker:
 
     def run_link(self, run_id: str, text: str) -> str:
         """A markdown link to a run that works inside the UI (descriptions are rendered there)."""
-        return f"[{text}](#/experiments/{self.experiment_id}/runs/{run_id})"
+        return f"[{text}](#/experiments/{self.experiment_id}/runs/{run_id}?workflowType=machine_learning)"
 
     def __getstate__(self) -> dict[str, Any]:
         # submitit pickles Hydra's callbacks with each job: run locks belong to this process only.
@@ -342,8 +372,9 @@ class Tracker:
         # log_model works only through MLflow's fluent (process-global) run; open ours just for it.
         mlflow.set_tracking_uri(self.location.tracking_uri)
         requirements = [f"torch=={torch.__version__.split('+')[0]}", "hgm_repro"]
-        with protected(), mlflow.start_run(run_id=run_id):
-            # pickle: the network class stays ours (pt2 would trace one fixed input shape).
+        with protected(), mlflow.start_run(run_id=run_id), _quiet("mlflow.pytorch"):
+            # pickle: the network class stays ours (pt2 would trace one fixed input shape). MLflow
+            # warns about pickle on every call; the README says what loading it takes.
             retry(mlflow.pytorch.log_model, network.cpu().eval(), name=name, pip_requirements=requirements,
                   serialization_format="pickle")
         # Leaving the fluent run marks it FINISHED: the run's owner sets its real status afterwards.
@@ -375,9 +406,10 @@ class Tracker:
         return self.search(f"tags.`mlflow.parentRunId` = '{parent_run_id}'")
 
     def summarise_launch(self, parent_run_id: str, description: str) -> dict[str, float]:
-        """Log the means of a launch's evaluations on its parent run, per model and scenario
-        (`grid/<model>/scenario<s>/<metric>`, over seeds); its description becomes `description`
-        followed by the same means as a markdown table."""
+        """The means over seeds of a launch's evaluations, per model and scenario, as a markdown
+        table after `description` in its parent run's description; returned as
+        `{"<model>/scenario<s>/<metric>": mean}`. Not logged as metrics: one chart per cell would
+        bury the training curves in the UI's chart view."""
         groups: dict[tuple[str, str], list[Any]] = {}
         for run in self.children(parent_run_id):
             tags = run.data.tags
@@ -392,11 +424,10 @@ class Tracker:
                 values = [r.data.metrics[f"eval/{metric}"] for r in runs if f"eval/{metric}" in r.data.metrics]
                 mean = tidy_number(sum(values) / len(values)) if values else float("nan")
                 if values:
-                    summary[f"grid/{model}/{scenario_label(scenario)}/{metric}"] = mean
+                    summary[f"{model}/{scenario_label(scenario)}/{metric}"] = mean
                 cells.append(f"{mean:.4g}")
             rows.append(f"| {model} | {scenario} | {len(runs)} | " + " | ".join(cells) + " |")
         if summary:
-            self.log_metrics(parent_run_id, summary, step=0)
             description += "\n\nMeans over seeds of its evaluations:\n\n" + "\n".join(rows)
         self.describe(parent_run_id, description)
         return summary
@@ -472,7 +503,27 @@ class Tracker:
 
     def download(self, run_id: str, artifact_path: str, dst: Path) -> Path:
         dst.mkdir(parents=True, exist_ok=True)
+        os.environ.setdefault("MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR", "false")  # a bar per file is noise in a log
         return Path(retry(self.client.download_artifacts, run_id, artifact_path, str(dst)))
+
+
+def shared_view(key: str) -> str:
+    """The experiment tag value of view `key` of `SHARED_VIEWS`, in MLflow's saved-view envelope."""
+    now = int(time.time() * 1000)
+    return json.dumps({"name": VIEW_NAMES[key], "createdAt": now, "updatedAt": now,
+                       "state": json.dumps(SHARED_VIEWS[key])})
+
+
+@contextmanager
+def _quiet(logger: str) -> Iterator[None]:
+    """Only errors from `logger` while inside (MLflow's per-call warnings and notices)."""
+    target = logging.getLogger(logger)
+    level = target.level
+    target.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        target.setLevel(level)
 
 
 def _create_sqlite_store_atomically(uri: str) -> None:
@@ -493,7 +544,8 @@ def _create_sqlite_store_atomically(uri: str) -> None:
     for stale in db.parent.glob(f".{db.name}.creating-*"):  # what killed creators left (we hold the store lock)
         stale.unlink(missing_ok=True)
     tmp = db.with_name(f".{db.name}.creating-{os.getpid()}")
-    MlflowClient(tracking_uri=f"{prefix}{tmp}").search_experiments(max_results=1)  # runs the migrations
+    with _quiet("mlflow.store.db.utils"), _quiet("alembic"):
+        MlflowClient(tracking_uri=f"{prefix}{tmp}").search_experiments(max_results=1)  # runs the migrations
     os.replace(tmp, db)
 
 
@@ -535,6 +587,15 @@ def launch_description(kind: str, overrides: str, where: Path) -> str:
     command = f"{SOURCE_NAME} {flag}{overrides}".strip()
     return (f"{what}: `{command}`, launched in `{where}`. The trainings and evaluations it ran are the "
             "runs nested under it.")
+
+
+def _sweep_time(sweep_dir: Path) -> str:
+    """`multirun/2026-12-02/22-11-36` -> `2026-12-02 22:11:36`: Hydra's default sweep directory
+    names the time and its parent the date; another directory is named as it is."""
+    date, time_of_day = sweep_dir.parent.name, sweep_dir.name
+    if re.fullmatch(r"\d{4}-\d\d-\d\d", date) and re.fullmatch(r"\d\d-\d\d-\d\d", time_of_day):
+        return f"{date} {time_of_day.replace('-', ':')}"
+    return sweep_dir.name
 
 
 def _sweep_jobs(config: DictConfig) -> list[Any]:
@@ -594,15 +655,17 @@ class SweepTracking(Callback):
         overrides = " ".join(OmegaConf.to_container(config.hydra.overrides.task, resolve=False))
         self._description = launch_description("sweep", overrides, Path(sweep_dir).resolve())
         self._parent = tracker.start_run(
-            f"sweep {Path(sweep_dir).name}",
+            f"sweep {_sweep_time(Path(sweep_dir))}",
             {**launch_tags("sweep", overrides), "sweep_dir": str(Path(sweep_dir).resolve())},
             description=self._description,
         )
         os.environ[PARENT_RUN_ENV] = self._parent
         # A sweep that raises never reaches on_multirun_end: close the parent run anyway.
         atexit.register(self._close, "FAILED")
-        log.info("MLflow parent run %s (%s); runs: %s", self._parent, tracker.location.tracking_uri,
-                 tracker.ui_url())
+        serve = tracker.ui_command()
+        log.info("MLflow parent run %s (%s); evaluations: %s ; training curves: %s%s", self._parent,
+                 tracker.location.tracking_uri, tracker.ui_url(), tracker.ui_url(CURVES_VIEW),
+                 f" (serve the store first: {serve})" if serve else "")
         self._train_grouped(config, tracker)
 
     def _train_grouped(self, config: DictConfig, tracker: Tracker) -> None:

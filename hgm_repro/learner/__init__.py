@@ -11,10 +11,11 @@ trees are replaced by pure-torch ones (`priority_trees.py`); the sampler itself 
 
 Checkpoints and resume
 ----------------------
-`checkpoint_dir/last.pt` is written every `learner.checkpoint_every` env steps, at the end, and
-when a stop signal (`hgm_repro.experiment.interrupts`) ends the run between two batches,
-`final.pt` at the end; each write goes to a temporary file first and is renamed into place, so a
-run killed while writing keeps the previous checkpoint. A checkpoint holds:
+`checkpoint_dir/last.pt` is written every `learner.checkpoint_every` env steps and when a stop
+signal (`hgm_repro.experiment.interrupts`) ends the run between two batches, `final.pt` at the end
+(which then replaces `last.pt`: a finished training keeps its full state once); each write goes to
+a temporary file first and is renamed into place, so a run killed while writing keeps the previous
+checkpoint. `best.pt` (validation on) holds only what evaluation loads. A checkpoint holds:
 
 - the online network, the target network (inside the loss module's state) and Adam's state;
 - env steps done, gradient updates done, the epsilon-greedy module (current epsilon), the PER beta

@@ -31,6 +31,8 @@ from ..experiment.checkpoint import (
     load_checkpoint,
     recorded_training_config,
     save_checkpoint,
+    save_final,
+    weights_only,
 )
 from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
 from ..experiment.schema import JobConfig
@@ -214,9 +216,7 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         metrics = episode_means(episodes, "val")
         if metrics["val/episode_return"] > best_val:
             best_val = metrics["val/episode_return"]
-            best = checkpoint_state(finished=False)
-            best["replay_buffer"] = None  # the weights are what best.pt is for
-            save_checkpoint(best, best_path)
+            save_checkpoint(weights_only(checkpoint_state(finished=False)), best_path)  # best.pt is for its weights
         metrics["val/best_episode_return"] = best_val
         if ema_net is not None:  # the averaged weights on the same validation traffic
             ema_net.eval()
@@ -229,7 +229,7 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
     def save_ema(state: dict[str, Any]) -> None:
         """ema.pt: a finished checkpoint whose network is the moving average (no replay memory)."""
         if ema_net is not None:
-            save_checkpoint({**state, "network": ema_net.state_dict(), "replay_buffer": None}, ema_path)
+            save_checkpoint(weights_only({**state, "network": ema_net.state_dict()}), ema_path)
 
     def stop(interrupted: JobInterrupted | None = None) -> None:
         """A stop signal ends training between batches, never inside one: last.pt holds everything
@@ -343,5 +343,4 @@ def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
         warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
     final = checkpoint_state(finished=True)
     save_ema(final)
-    save_checkpoint(final, last_path)
-    return save_checkpoint(final, final_path)
+    return save_final(final, checkpoint_dir)

@@ -40,7 +40,14 @@ from torchrl.objectives import HardUpdate
 
 from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
-from ..experiment.checkpoint import BEST_CHECKPOINT, load_checkpoint, recorded_training_config, save_checkpoint
+from ..experiment.checkpoint import (
+    BEST_CHECKPOINT,
+    load_checkpoint,
+    recorded_training_config,
+    save_checkpoint,
+    save_final,
+    weights_only,
+)
 from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
 from ..experiment.schema import JobConfig
 from ..experiment.train_key import train_key, training_config
@@ -369,9 +376,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
         metrics = episode_means(episodes, "val")
         if metrics["val/episode_return"] > p["best_val"]:
             p["best_val"] = metrics["val/episode_return"]
-            best = checkpoint_state(k, finished=False)
-            best["replay_buffer"] = None
-            save_checkpoint(best, member.checkpoint_dir / BEST_CHECKPOINT)
+            save_checkpoint(weights_only(checkpoint_state(k, finished=False)), member.checkpoint_dir / BEST_CHECKPOINT)
         metrics["val/best_episode_return"] = p["best_val"]
         return metrics
 
@@ -470,8 +475,7 @@ def _train_lockstep(members: list[Member]) -> list[Path]:
     finals = []
     for k, member in enumerate(members):
         final = checkpoint_state(k, finished=True)
-        save_checkpoint(final, member.last_path)
-        finals.append(save_checkpoint(final, member.final_path))
+        finals.append(save_final(final, member.checkpoint_dir))
     return finals
 
 

@@ -1,0 +1,60 @@
+"""The report's first page and wording: its scale, a smoke run's banner, claims by number, and no
+false coverage note (fast: no store, no PDF)."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
+from analysis.discussion import discussion
+from analysis.pipeline import _config_runs, _models_with_several_training_configs
+from analysis.report import claim_numbers
+from analysis.scale import is_smoke, scale_text
+
+SMOKE_CONFIG = """experiment: {name: smoke}
+learner: {total_steps: 256}
+observation: {height: 36, width: 36, frame_stack: 2}
+eval: {checkpoint: final}
+scenario: {name: '3'}
+seed: 1
+model: {learned: true}
+"""
+
+
+def _claims() -> list[ClaimResult]:
+    verdicts = [NOT_SUPPORTED] * 4 + [INCONCLUSIVE] * 2 + [SUPPORTED]
+    return [ClaimResult(n, f"claim {n}", v, "rule") for n, v in enumerate(verdicts, start=1)]
+
+
+def test_scale_states_ours_beside_the_papers() -> None:
+    evals = pd.DataFrame({"n_episodes": [4, 4, 8]})
+    text = scale_text({"proposed": SMOKE_CONFIG}, evals)
+    assert text == ("preset `smoke`: 256 training steps per seed (paper 1,000,000), images 36x36 with 2 frames "
+                    "(paper 84x84, 4); tested with the `final` checkpoint (paper: the final network); 4/8 test "
+                    "episodes per cell (paper: 200,000 decisions, about 834 episodes).")
+    assert is_smoke({"proposed": SMOKE_CONFIG}) and not is_smoke({"proposed": "experiment: {name: quick}\n"})
+    assert scale_text({}, pd.DataFrame()) == "scale unknown: the runs logged no config."
+
+
+def test_claims_are_listed_by_number_never_as_a_count() -> None:
+    claims = _claims()
+    assert claim_numbers(claims, SUPPORTED) == "claim 7"
+    assert claim_numbers(claims, NOT_SUPPORTED) == "claims 1, 2, 3 and 4"
+    assert claim_numbers(claims, INCONCLUSIVE) == "claims 5 and 6"
+    assert claim_numbers(claims[:4], SUPPORTED) == "none"
+    first = discussion(claims, pd.DataFrame(), 1, pd.DataFrame())[0]
+    assert first == ("Of the paper's seven claims, our runs support one claim (7), contradict four claims "
+                     "(1, 2, 3 and 4) and leave two claims (5 and 6) undecided.")
+
+
+def test_seeds_alone_are_not_several_training_configs() -> None:
+    """A train_key includes the seed: five seeds of one config are five keys and no warning."""
+    runs = pd.DataFrame({"stage": ["train"] * 4 + ["eval"], "model": ["proposed", "proposed", "min", "min", "min"],
+                         "seed": [0, 1, 0, 0, 0], "train_key": ["a", "b", "c", "d", "x"]})
+    assert _models_with_several_training_configs(runs) == ["min"]  # min's seed 0: two keys
+    assert _models_with_several_training_configs(runs[runs["model"] == "proposed"]) == []
+
+
+def test_the_printed_config_says_which_run_it_is_from() -> None:
+    assert _config_runs({"proposed": SMOKE_CONFIG}) == {
+        "proposed": "of one evaluation run, scenario 3, seed 1; its other runs differ in scenario and seed only"}
