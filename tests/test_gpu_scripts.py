@@ -154,7 +154,8 @@ echo "$*" >> "$CALLS"
 case "$*" in
   *budget.py*) echo "learner.total_steps=4096 learner.eps_steps=4096" ;;
   *hgm_repro.bench*) echo '{"what": "simulator", "n_envs": 8192, "env_steps_per_s": 1.0}' ;;
-  *"-m hgm_repro -m"*) echo "job end: model=... (1.0 s)"; echo "job end: model=... (1.0 s)" ;;
+  *"-m hgm_repro -m"*) echo "job end: model=... (1.0 s)"; echo "job end: model=... (1.0 s)"
+    echo "[HYDRA] grouped training 'min': 2048/4096 env steps per member, 9 steps/s per member" ;;
   *"-m analysis"*) mkdir -p "$RUNS/bundle/report" && echo pdf > "$RUNS/bundle/report/report.pdf" ;;
 esac
 """
@@ -199,6 +200,7 @@ def test_all_runs_every_step_in_one_call_and_hands_the_budget_to_the_grid(tmp_pa
     assert {"protocol.log", "bench.jsonl", "results.tgz", "report.pdf"} <= set(files) and len(files) <= 8
     log = (out / "protocol.log").read_text()
     assert all(f"== {step} (" in log for step in ("check", "bench", "references", "grid", "collect"))
+    assert "reached: grouped training 'min': 2048/4096 env steps per member" in log
     assert '"what": "simulator"' in (out / "bench.jsonl").read_text()
 
 

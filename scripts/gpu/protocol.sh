@@ -196,7 +196,11 @@ EOF
         echo "no training budget (scripts/gpu/budget.py failed): the grid is not run" >&2; status=1; continue
       fi
       # Each model's seeds train as one group; no validation passes (the paper tests final.pt).
-      sweep "$(left)" "$LEARNED" learner.grouped=true learner.eval_every=0 eval.checkpoint=final "${budget[@]}" || status=1
+      sweep "$(left)" "$LEARNED" learner.grouped=true learner.eval_every=0 eval.checkpoint=final "${budget[@]}" \
+        | tee "$RUNS/grid.log" || status=1
+      # What the trainings reached (a cut-off one stops short of the budget):
+      grep -o "grouped training '[a-z_]*': [0-9]*/[0-9]* env steps per member" "$RUNS/grid.log" \
+        | awk '{last[$3] = $0} END {for (m in last) print "reached: " last[m]}' || true
       ;;
     collect)
       rm -rf "$RUNS/bundle"
