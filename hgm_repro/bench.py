@@ -265,15 +265,16 @@ PARTS = ("simulator", "observations", "envs", "learner", "grouped", "highway")  
 
 
 def _member_job(device: torch.device, total_steps: int, seed: int, threads: int, preset: str = "quick",
-                warmup_steps: int | None = None) -> Any:
+                warmup_steps: int | None = None, log_every: int | None = None) -> Any:
     """One training member of the grouped-training lines: `preset` (the quick one's env count resized
-    to the device), no validation, no logs but the last."""
+    to the device), no validation, no logs but the last (or every `log_every` env steps)."""
     sized = [f"learner.n_envs={16 if device.type == 'cpu' else 64}"] if preset == "quick" else []
     return _compose(f"experiment={preset}", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
                     f"learner.warmup_steps={total_steps // 4 if warmup_steps is None else warmup_steps}", *sized,
                     f"learner.torch_threads={threads}", "learner.eval_every=0",
                     "eval.checkpoint=final",  # no validation, so no best.pt for the preset's test to drive
-                    f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+                    f"learner.checkpoint_every={total_steps * 10}",
+                    f"learner.log_every={log_every or total_steps * 10}")
 
 
 def _train_member(device: str, total_steps: int, seed: int, threads: int, directory: str) -> tuple[int, int]:
@@ -289,15 +290,17 @@ def _train_member(device: str, total_steps: int, seed: int, threads: int, direct
 
 
 def bench_grouped_training(device: torch.device, total_steps: int, members: int, path: str,
-                           threads: int, preset: str = "quick", warmup_steps: int | None = None) -> dict[str, Any]:
+                           threads: int, preset: str = "quick", warmup_steps: int | None = None,
+                           log_every: int | None = None) -> dict[str, Any]:
     """Aggregate training speed of `members` seeds with `preset` (default quick), end to end, by one of
     three paths: `grouped` (one process, one vmapped update over the members, `threads` torch threads),
     `sequential` (one process, the members one after another on `threads` threads) or `parallel`
     (one solo job per core at once, one thread each: what a joblib sweep of solo jobs does).
     `env_steps_per_s` and `updates_per_s` are summed over the members. The grouped path also gives
-    `member_env_steps_per_s`, one member's rate in the training loop alone (its `train/steps_per_s`),
-    and `fixed_s`, the rest of the time (building the group, the final checkpoints): what a longer
-    training of the same group costs is about fixed_s + steps / member_env_steps_per_s."""
+    `member_env_steps_per_s`, one member's rate in the training loop alone (its `train/steps_per_s`
+    over the last `log_every` steps, or the whole loop), and `fixed_s`, the rest of the time (building
+    the group, the first updates' start, the final checkpoints): what a longer training of the same
+    group costs is about fixed_s + steps / member_env_steps_per_s."""
     import tempfile
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
@@ -308,10 +311,11 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
 
     if path not in GROUPED_PATHS:
         raise ValueError(f"path={path!r} is not one of {GROUPED_PATHS}")
-    jobs = [_member_job(device, total_steps, seed, threads, preset, warmup_steps) for seed in range(members)]
+    jobs = [_member_job(device, total_steps, seed, threads, preset, warmup_steps, log_every)
+            for seed in range(members)]
     before = torch.get_num_threads()
     processes = 1
-    loop_rates: list[float] = []  # the members' train/steps_per_s over the whole loop (log_every > total_steps)
+    loop_rates: list[float] = []  # the members' train/steps_per_s since their previous log
 
     def log(metrics: dict[str, float], step: int) -> None:
         loop_rates.append(metrics["train/steps_per_s"])
@@ -569,12 +573,13 @@ def main(argv: list[str] | None = None) -> int:
                     emit(row)
         if "rate" in parts:
             # Warm-up of one batch per member: the line measures the loop with its updates, as most of a
-            # longer training runs (the warm-up's random steps are faster, so a budget from it is safe).
+            # longer training runs (the warm-up's random steps are faster, so a budget from it is safe);
+            # the rate is the second half's, after the first updates' one-off costs.
             members = args.rate_members
             print(f"training rate: {members} members grouped, {args.preset} preset, on {device}...", file=sys.stderr)
             emit(bench_grouped_training(device, args.rate_steps, members, "grouped", threads=torch.get_num_threads(),
-                                        preset=args.preset, warmup_steps=_compose(
-                                            f"experiment={args.preset}").learner.batch_size))
+                                        preset=args.preset, log_every=max(1, args.rate_steps // 2),
+                                        warmup_steps=_compose(f"experiment={args.preset}").learner.batch_size))
         if "grouped_update" in parts:
             modes = args.update_modes.split(",") if args.update_modes else \
                 (list(GROUPED_UPDATE_MODES) if gpu else ["eager"])
