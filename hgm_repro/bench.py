@@ -261,16 +261,20 @@ def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, 
 
 
 GROUPED_PATHS = ("grouped", "sequential", "parallel")
+PARTS = ("simulator", "observations", "envs", "learner", "grouped", "highway")  # the default parts
 
 
-def _member_job(device: torch.device, total_steps: int, seed: int, threads: int) -> Any:
-    """One training member of the grouped-training lines: the quick preset, no validation, no logs."""
-    n_envs = 16 if device.type == "cpu" else 64
-    return _compose("experiment=quick", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
-                    f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
+def _member_job(device: torch.device, total_steps: int, seed: int, threads: int, preset: str = "quick",
+                warmup_steps: int | None = None, log_every: int | None = None) -> Any:
+    """One training member of the grouped-training lines: `preset` (the quick one's env count resized
+    to the device), no validation, no logs but the last (or every `log_every` env steps)."""
+    sized = [f"learner.n_envs={16 if device.type == 'cpu' else 64}"] if preset == "quick" else []
+    return _compose(f"experiment={preset}", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
+                    f"learner.warmup_steps={total_steps // 4 if warmup_steps is None else warmup_steps}", *sized,
                     f"learner.torch_threads={threads}", "learner.eval_every=0",
                     "eval.checkpoint=final",  # no validation, so no best.pt for the preset's test to drive
-                    f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+                    f"learner.checkpoint_every={total_steps * 10}",
+                    f"learner.log_every={log_every or total_steps * 10}")
 
 
 def _train_member(device: str, total_steps: int, seed: int, threads: int, directory: str) -> tuple[int, int]:
@@ -286,12 +290,17 @@ def _train_member(device: str, total_steps: int, seed: int, threads: int, direct
 
 
 def bench_grouped_training(device: torch.device, total_steps: int, members: int, path: str,
-                           threads: int) -> dict[str, Any]:
-    """Aggregate training speed of `members` seeds with the quick preset, end to end, by one of three
-    paths: `grouped` (one process, one vmapped update over the members, `threads` torch threads),
+                           threads: int, preset: str = "quick", warmup_steps: int | None = None,
+                           log_every: int | None = None) -> dict[str, Any]:
+    """Aggregate training speed of `members` seeds with `preset` (default quick), end to end, by one of
+    three paths: `grouped` (one process, one vmapped update over the members, `threads` torch threads),
     `sequential` (one process, the members one after another on `threads` threads) or `parallel`
     (one solo job per core at once, one thread each: what a joblib sweep of solo jobs does).
-    `env_steps_per_s` and `updates_per_s` are summed over the members."""
+    `env_steps_per_s` and `updates_per_s` are summed over the members. The grouped path also gives
+    `member_env_steps_per_s`, one member's rate in the training loop alone (its `train/steps_per_s`
+    over the last `log_every` steps, or the whole loop), and `fixed_s`, the rest of the time (building
+    the group, the first updates' start, the final checkpoints): what a longer training of the same
+    group costs is about fixed_s + steps / member_env_steps_per_s."""
     import tempfile
     from concurrent.futures import ProcessPoolExecutor
     from multiprocessing import get_context
@@ -302,14 +311,20 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
 
     if path not in GROUPED_PATHS:
         raise ValueError(f"path={path!r} is not one of {GROUPED_PATHS}")
-    jobs = [_member_job(device, total_steps, seed, threads) for seed in range(members)]
+    jobs = [_member_job(device, total_steps, seed, threads, preset, warmup_steps, log_every)
+            for seed in range(members)]
     before = torch.get_num_threads()
     processes = 1
+    loop_rates: list[float] = []  # the members' train/steps_per_s since their previous log
+
+    def log(metrics: dict[str, float], step: int) -> None:
+        loop_rates.append(metrics["train/steps_per_s"])
+
     with tempfile.TemporaryDirectory() as tmp:
         dirs = [Path(tmp) / f"member{k}" for k in range(members)]
         start = time.perf_counter()
         if path == "grouped":
-            finals = [load_checkpoint(f) for f in train_group(jobs, dirs, [lambda metrics, step: None] * members)]
+            finals = [load_checkpoint(f) for f in train_group(jobs, dirs, [log] * members)]
             counts = [(int(f["env_steps"]), int(f["updates"])) for f in finals]
         elif path == "sequential":
             counts = [_train_member(str(device), total_steps, seed, threads, str(d)) for seed, d in enumerate(dirs)]
@@ -325,11 +340,96 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
     steps, updates = sum(c[0] for c in counts), sum(c[1] for c in counts)
     label = {"grouped": "grouped", "sequential": "solo, one after another",
              "parallel": f"solo, {processes} jobs at once"}[path]
-    return dict(what="learner training, members (quick preset, end to end)", device=str(device), members=members,
-                path=label, n_envs=jobs[0].learner.n_envs * members, camera="front", hgm="paper",
-                image=f"{jobs[0].observation.height}x{jobs[0].observation.width}",
-                env_steps_per_s=round(steps / elapsed, 1), updates_per_s=round(updates / elapsed, 2),
-                torch_threads=1 if path == "parallel" else threads, processes=processes)
+    row = dict(what=f"learner training, members ({preset} preset, end to end)", device=str(device), members=members,
+               path=label, n_envs=jobs[0].learner.n_envs * members, camera="front", hgm="paper",
+               image=f"{jobs[0].observation.height}x{jobs[0].observation.width}",
+               env_steps_per_s=round(steps / elapsed, 1), updates_per_s=round(updates / elapsed, 2),
+               torch_threads=1 if path == "parallel" else threads, processes=processes)
+    if path == "grouped" and loop_rates:
+        member_rate = loop_rates[-1]
+        row.update(preset=preset, member_steps=counts[0][0], warmup_steps=jobs[0].learner.warmup_steps,
+                   update_every=jobs[0].learner.update_every, member_env_steps_per_s=round(member_rate, 1),
+                   fixed_s=round(max(elapsed - counts[0][0] / member_rate, 0.0), 2))
+    return row
+
+
+GROUPED_UPDATE_MODES = ("eager", "bf16", "cuda_graph", "compile")
+
+
+def bench_grouped_update(device: torch.device, seconds: float, members: int, mode: str,
+                         preset: str = "paper") -> dict[str, Any]:
+    """Updates per second of `members` stacked networks (`preset`'s network and batch size) in one
+    step as the grouped learner takes it: its vmapped TD loss, backward, per-member gradient clipping
+    and one Adam over the stacked weights. `mode`: eager, bf16 (forward passes autocast to bf16, as
+    learner.update_dtype=bfloat16), cuda_graph (the step captured by tensordict's CudaGraphModule,
+    as learner.cuda_graph does for one member) or compile (torch.compile, as learner.compile).
+    The grouped learner itself runs eager or bf16: these lines say whether the other two would pay."""
+    import copy
+
+    from tensordict import TensorDict
+    from torch.func import stack_module_state
+
+    from .learner.builders import make_network
+
+    # The grouped learner's own loss and clipping (its update loop is not a function of its own).
+    from .learner.grouped import _clip_per_member, _stacked_loss
+    from .simulator import N_ACTIONS
+
+    if mode not in GROUPED_UPDATE_MODES:
+        raise ValueError(f"mode={mode!r} is not one of {GROUPED_UPDATE_MODES}")
+    if mode in ("bf16", "cuda_graph") and device.type != "cuda":
+        raise ValueError(f"mode={mode!r} needs a CUDA device")
+    job = _compose(f"experiment={preset}", f"device={device}")
+    L = job.learner
+    nets = [make_network(job).to(device) for _ in range(members)]
+    params, buffers = stack_module_state(nets)
+    names = list(params)
+    target = {n: p.detach().clone() for n, p in params.items()}
+    base = copy.deepcopy(nets[0]).to("meta")
+    optimizer = torch.optim.Adam([params[n] for n in names], lr=L.lr, capturable=mode == "cuda_graph")
+    in_keys = list(nets[0].in_keys)
+    loss_fn = _stacked_loss(base, in_keys, L.gamma, L.double_dqn, L.loss_function)
+    h, w, f, b = job.observation.height, job.observation.width, job.observation.frame_stack, L.batch_size
+    gen = torch.Generator(device=device).manual_seed(0)
+
+    def images() -> torch.Tensor:
+        return torch.randint(0, 256, (members, b, 3 * f, h, w), dtype=torch.uint8, device=device, generator=gen)
+
+    action = torch.randint(0, N_ACTIONS, (members, b), device=device, generator=gen)
+    batch = TensorDict({
+        **{k: images() for k in in_keys}, **{"next_" + k: images() for k in in_keys},
+        "action": torch.nn.functional.one_hot(action, N_ACTIONS).float(),
+        "reward": torch.randn(members, b, device=device, generator=gen),
+        "terminated": torch.zeros(members, b, device=device), "steps": torch.ones(members, b, device=device),
+        "weight": torch.rand(members, b, device=device, generator=gen),
+    }, batch_size=[members, b], device=device)
+
+    def update(inputs: TensorDict) -> TensorDict:
+        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=mode == "bf16"):
+            loss, td_error = loss_fn({n: params[n] for n in names}, buffers, target, inputs.to_dict())
+        loss, td_error = loss.float(), td_error.float()
+        optimizer.zero_grad(set_to_none=False)
+        loss.sum().backward()
+        norms = _clip_per_member([params[n].grad for n in names], L.max_grad_norm)
+        optimizer.step()
+        return TensorDict(loss=loss.detach(), td_error=td_error.detach(), grad_norm=norms, batch_size=[members])
+
+    if mode == "compile":
+        update = torch.compile(update)
+    elif mode == "cuda_graph":
+        from tensordict.nn import CudaGraphModule
+
+        update = CudaGraphModule(update, warmup=10)
+    start = time.perf_counter()
+    update(batch)  # the first call compiles or captures
+    _sync(device)
+    first_s = time.perf_counter() - start
+    calls, elapsed = _timed(lambda: update(batch), device, seconds, warmup=12)
+    return dict(what="grouped update", device=str(device), n_envs=0, camera="front", hgm="paper", mode=mode,
+                members=members, batch_size=b, image=f"{h}x{w}", preset=preset,
+                parameters=sum(p.numel() for p in nets[0].parameters()), first_call_s=round(first_s, 2),
+                env_steps_per_s=None, updates_per_s=round(calls / elapsed, 1),
+                member_updates_per_s=round(calls * members / elapsed, 1))
 
 
 def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[str, Any] | None:
@@ -360,14 +460,18 @@ def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[s
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hgm_repro.bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", choices=["simulator", "observations", "envs", "learner", "grouped", "highway"],
-                        action="append",
-                        help="measure only these parts (repeatable); default: all")
+    parser.add_argument("--only", choices=[*PARTS, "rate", "grouped_update"], action="append",
+                        help="measure only these parts (repeatable); default: all but rate and grouped_update")
     parser.add_argument("--n-envs", default="1,64,256,1024,4096",
                         help="comma-separated batch sizes for the simulator on CPU (default: %(default)s)")
     parser.add_argument("--cuda-n-envs", default="1024,8192,32768",
                         help="batch sizes for the simulator on CUDA, when a GPU is there (default: %(default)s)")
-    parser.add_argument("--obs-n-envs", type=int, default=256, help="batch size for observations (%(default)s)")
+    parser.add_argument("--obs-n-envs", default=None,
+                        help="comma-separated batch sizes for the observation lines (default: 256 on CPU, the "
+                             "largest --cuda-n-envs on CUDA)")
+    parser.add_argument("--variants", default=",".join(OBS_VARIANTS),
+                        help="comma-separated observation variants (default: all, and the proposed one under "
+                             "resets; naming them leaves that line out)")
     parser.add_argument("--env-n-envs", type=int, default=256,
                         help="batch size for the TorchRL env and the Gymnasium VectorEnv (%(default)s)")
     parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement (default: %(default)s)")
@@ -379,6 +483,19 @@ def main(argv: list[str] | None = None) -> int:
                              "is the paper's grid)")
     parser.add_argument("--grouped-steps", type=int, default=None,
                         help="env steps per member of the grouped-training lines (default: --train-steps)")
+    parser.add_argument("--preset", default="paper",
+                        help="experiment preset of the rate and grouped_update lines (default: %(default)s)")
+    parser.add_argument("--rate-members", type=int, default=5,
+                        help="members of the rate line: one grouped training, its loop's rate per member and its "
+                             "fixed cost, what a training budget is sized from (default: %(default)s)")
+    parser.add_argument("--rate-steps", type=int, default=4096,
+                        help="env steps per member of the rate line (default: %(default)s)")
+    parser.add_argument("--update-members", default="15",
+                        help="comma-separated member counts of the grouped_update lines (default: %(default)s, "
+                             "every seed of the paper's grid)")
+    parser.add_argument("--update-modes", default=None,
+                        help=f"comma-separated modes of the grouped_update lines, of {', '.join(GROUPED_UPDATE_MODES)} "
+                             "(default: all on CUDA, eager on CPU); a mode that fails gives a line with its error")
     parser.add_argument("--device", choices=["cpu", "cuda", "all"], default="all",
                         help="which devices to measure (default: every one present)")
     args = parser.parse_args(argv)
@@ -389,7 +506,11 @@ def main(argv: list[str] | None = None) -> int:
     logging.getLogger("torchrl").setLevel(logging.WARNING)
     if args.threads:
         torch.set_num_threads(args.threads)
-    parts = set(args.only or ["simulator", "observations", "envs", "learner", "grouped", "highway"])
+    parts = set(args.only or PARTS)
+    variants = [v for v in args.variants.split(",") if v]
+    unknown = sorted(set(variants) - set(OBS_VARIANTS))
+    if unknown:
+        parser.error(f"--variants: unknown {unknown}; known: {', '.join(OBS_VARIANTS)}")
     devices = []
     if args.device in ("cpu", "all"):
         devices.append(torch.device("cpu"))
@@ -413,12 +534,16 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"simulator n_envs={n} on {device}...", file=sys.stderr)
                 emit(bench_simulator(n, device, args.seconds))
         if "observations" in parts:
-            n = max(sizes) if gpu else args.obs_n_envs
-            for variant in OBS_VARIANTS:
-                print(f"simulator+{variant} n_envs={n} on {device}...", file=sys.stderr)
-                emit(bench_observations(variant, n, device, args.seconds))
-            print(f"simulator+proposed under resets n_envs={n} on {device}...", file=sys.stderr)
-            emit(bench_observations_under_resets("proposed", n, device, args.seconds))
+            obs_sizes = [int(x) for x in args.obs_n_envs.split(",") if x] if args.obs_n_envs else \
+                [max(sizes) if gpu else 256]
+            for n in obs_sizes:
+                for variant in variants:
+                    print(f"simulator+{variant} n_envs={n} on {device}...", file=sys.stderr)
+                    emit(bench_observations(variant, n, device, args.seconds))
+            if len(variants) == len(OBS_VARIANTS):
+                n = max(obs_sizes)
+                print(f"simulator+proposed under resets n_envs={n} on {device}...", file=sys.stderr)
+                emit(bench_observations_under_resets("proposed", n, device, args.seconds))
         if "envs" in parts:
             print(f"torchrl env and gymnasium vector env n_envs={args.env_n_envs} on {device}...", file=sys.stderr)
             for row in bench_envs(args.env_n_envs, device, 2 * args.seconds):
@@ -446,6 +571,27 @@ def main(argv: list[str] | None = None) -> int:
                     row = bench_grouped_training(device, steps, members, path, threads=cores)
                     row["vs_one_member_one_thread"] = round(row["env_steps_per_s"] / alone["env_steps_per_s"], 3)
                     emit(row)
+        if "rate" in parts:
+            # Warm-up of one batch per member: the line measures the loop with its updates, as most of a
+            # longer training runs (the warm-up's random steps are faster, so a budget from it is safe);
+            # the rate is the second half's, after the first updates' one-off costs.
+            members = args.rate_members
+            print(f"training rate: {members} members grouped, {args.preset} preset, on {device}...", file=sys.stderr)
+            emit(bench_grouped_training(device, args.rate_steps, members, "grouped", threads=torch.get_num_threads(),
+                                        preset=args.preset, log_every=max(1, args.rate_steps // 2),
+                                        warmup_steps=_compose(f"experiment={args.preset}").learner.batch_size))
+        if "grouped_update" in parts:
+            modes = args.update_modes.split(",") if args.update_modes else \
+                (list(GROUPED_UPDATE_MODES) if gpu else ["eager"])
+            for members in [int(x) for x in args.update_members.split(",") if x]:
+                for mode in modes:
+                    print(f"grouped update, {members} members, {mode}, on {device}...", file=sys.stderr)
+                    try:
+                        emit(bench_grouped_update(device, args.seconds, members, mode, args.preset))
+                    except Exception as error:  # one mode failing must not cost the lines after it
+                        emit(dict(what="grouped update", device=str(device), n_envs=0, camera="front", hgm="paper",
+                                  mode=mode, members=members, preset=args.preset, env_steps_per_s=None,
+                                  error=f"{type(error).__name__}: {str(error)[:300]}"))
     if "highway" in parts:
         for observation in ("Kinematics", "Grayscale"):
             print(f"highway-env ({observation})...", file=sys.stderr)

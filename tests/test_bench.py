@@ -62,3 +62,21 @@ def test_grouped_training_members_are_valid_jobs_of_the_current_preset():
 
     job = _member_job(torch.device("cpu"), total_steps=64, seed=3, threads=1)
     assert job.learner.eval_every == 0 and job.eval.checkpoint == "final" and job.seed == 3
+
+
+def test_bench_protocol_lines_rate_and_grouped_update(capsys):
+    # What scripts/gpu/protocol.sh asks for: named variants at several sizes, the rate line the
+    # training budget is sized from, and one grouped update per mode (a failing mode gives its error).
+    assert main(["--only", "observations", "--variants", "proposed", "--obs-n-envs", "2,3", "--only", "rate",
+                 "--only", "grouped_update", "--preset", "smoke", "--rate-members", "2", "--rate-steps", "32",
+                 "--update-members", "2", "--update-modes", "eager,bf16", "--seconds", "0.05", "--device", "cpu"]) == 0
+    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    assert [(r["what"], r["n_envs"]) for r in rows[:2]] == [("simulator+proposed", 2), ("simulator+proposed", 3)]
+    rate = rows[2]
+    assert rate["what"] == "learner training, members (smoke preset, end to end)" and rate["members"] == 2
+    assert rate["member_env_steps_per_s"] > 0 and rate["fixed_s"] >= 0 and rate["member_steps"] == 32
+    eager, bf16 = rows[3:]
+    assert (eager["what"], eager["mode"], eager["members"]) == ("grouped update", "eager", 2)
+    assert eager["updates_per_s"] > 0 and eager["member_updates_per_s"] == pytest.approx(2 * eager["updates_per_s"],
+                                                                                          abs=0.2)  # both rounded
+    assert bf16["mode"] == "bf16" and "needs a CUDA device" in bf16["error"]

@@ -1,134 +1,220 @@
 #!/usr/bin/env bash
-# The paper's protocol on a lent GPU machine: Python 3.12 with its own torch (CUDA), no network,
-# no torchrl / tensordict / hydra / mlflow. Run from the repository root there:
+# The paper's protocol on a lent GPU machine, in ONE call: Python 3.12 with its own torch (CUDA), no
+# network, no torchrl / tensordict / hydra / mlflow, about 15 minutes of machine time in all (every
+# start and idle wait counted), 10 minutes per command, the machine given back 30 s after a command
+# ends (a second call finds a bare machine). Run from the repository root there, with .whl carried:
 #
-#   bash scripts/gpu/protocol.sh STEP [STEP ...] [-- extra Hydra overrides]
+#   bash scripts/gpu/protocol.sh all [-- extra Hydra overrides]      # the whole protocol, one call
+#   bash scripts/gpu/protocol.sh STEP [STEP ...] [-- overrides]       # some steps, in the order given
 #
-# Steps (in this order for the whole protocol; each command stays under LIMIT_S, 540 s by default,
-# so that it fits a 10-minute call):
-#   check       imports, versions, the CUDA tests and a smoke job on cuda
-#   bench       python -m hgm_repro.bench on cuda: simulator at 8,192 and 32,768 envs with camera +
-#               HGM, grouped training with 1, 5 and 15 members -> $OUT/bench.jsonl
-#   grid        the paper's grid at Table 4 scale, seeds 0-4: 15 trainings (grouped: one process,
-#               the seeds of each model in one vmapped update), then 75 test cells
-#   references  the human-driven and IDM + MOBIL hosts over the same scenarios and seeds
-#   collect     the results bundle and report -> $OUT/results.tgz (docs/results/ layout)
-# A step cut off at the time limit is stopped with SIGTERM: trainings write their checkpoints at
-# the next safe point and exit; the same command again resumes them (finished work is reused).
-# The store and checkpoints live in studies/runs/gpu/ on that machine, kept only while it stays
-# warm between calls: run the next command within its idle window.
+# all = check bench references grid collect, the whole under LIMIT_S (540 s: a 10-minute call):
+#   check       imports, versions, a simulator step with camera + HGM on $DEVICE, the CUDA-vs-CPU test
+#   bench       at most BENCH_S: simulator at 8,192 envs, with camera + HGM at 8,192 and 32,768; the rate
+#               line (the seeds of one model trained as a group at $EXPERIMENT, its loop's env steps/s per
+#               member); one grouped update of every seed of the grid (15 members) eager, bf16, CUDA graph
+#               and compiled (compiled last: the slowest to start)
+#   references  the human-driven and IDM + MOBIL hosts in every scenario and seed (no training)
+#   grid        the 3 models x seeds, each model's seeds trained as one group, at the largest training
+#               budget the measured rate fits in the time left (scripts/gpu/budget.py: logged, with the
+#               fraction of Table 4's 1M steps), then their test cells in every scenario
+#   collect     the results bundle and its report -> $OUT/results.tgz and $OUT/report.pdf
+# Everything reaches $OUT as it goes: protocol.log (this output), bench.jsonl line by line,
+# budget.json once chosen; the grid stops RESERVE_S before the limit so that collect always runs.
+# A step cut off at the limit gets SIGTERM: trainings write last.pt at the next safe point and
+# exit; on a machine kept warm, the same command again resumes (finished work is reused).
 #
-# Before the first call, on a machine with pip and a package index (not the GPU machine):
+# Before the call, on a machine with pip and a package index (not the GPU machine):
 #   python scripts/gpu/wheelhouse.py        # .whl/, about 40 MiB; the device call carries .whl
-# Environment: LIMIT_S (seconds per command, default 540), PYTHON (default python3),
-# SITE (where the wheels go, default /tmp/site), TEST_ENVS (test envs per cell, default 1024),
-# DEVICE (default cuda), EXPERIMENT (default paper), SEEDS (default 0,1,2,3,4), SCENARIOS
-# (default 1,2,3,4,5). A rehearsal on a CPU machine with the wheels for its Python:
-#   DEVICE=cpu EXPERIMENT=smoke SEEDS=0,1 SCENARIOS=1 bash scripts/gpu/protocol.sh check grid collect
+# Environment: LIMIT_S (seconds in all, default 540), BENCH_S (cap of bench, default 150), RESERVE_S
+# (kept for collect, default 60), PYTHON (default python3), SITE (where the wheels go, /tmp/site),
+# DEVICE (cuda), EXPERIMENT (paper), SEEDS (0,1,2,3,4; 0,1 on cpu), SCENARIOS (1,2,3,4,5; 1,2 on cpu),
+# TEST_ENVS (test envs per cell: 1024; 4 on cpu), JOBS (test cells at once: 8; 2 on cpu), REFERENCES_S
+# (cap of references: a third of the time left), TOTAL_STEPS (a training budget instead of the
+# rule's), UPDATE_MODES (the grouped update's modes). Without .whl the script uses the packages its
+# Python already has. A rehearsal of the same steps on a CPU machine, a smaller grid, the same limit:
+#   DEVICE=cpu EXPERIMENT=smoke bash scripts/gpu/protocol.sh all
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 ROOT=$PWD
 START=$(date +%s)
 LIMIT_S=${LIMIT_S:-540}
+BENCH_S=${BENCH_S:-150}
+RESERVE_S=${RESERVE_S:-60}
 PY=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site}
 OUT=${OUT:-$ROOT/studies/runs/gpu/out}
-RUNS=$ROOT/studies/runs/gpu
-# 1,024 test envs drive one complete episode each per cell: 245,760 decisions, Table 4's 200,000
-# rounded up to whole episodes, in one pass (64 envs would take 14 passes).
-TEST_ENVS=${TEST_ENVS:-1024}
+RUNS=${RUNS:-$ROOT/studies/runs/gpu}  # the store, checkpoints and bundle (on the machine, never in $OUT)
 DEVICE=${DEVICE:-cuda}
 EXPERIMENT=${EXPERIMENT:-paper}
-SEEDS=${SEEDS:-0,1,2,3,4}
-SCENARIOS=${SCENARIOS:-1,2,3,4,5}
+if [ "$DEVICE" = cpu ]; then cpu=1; else cpu=0; fi
+# A CPU rehearsal runs every step on a smaller grid: on a 2-core CPU a test cell takes seconds (half
+# a minute with 1,024 envs), so 150 of them would not fit, and its 2 cores run 2 cells at once.
+SEEDS=${SEEDS:-$([ $cpu = 1 ] && echo 0,1 || echo 0,1,2,3,4)}
+SCENARIOS=${SCENARIOS:-$([ $cpu = 1 ] && echo 1,2 || echo 1,2,3,4,5)}
+# 1,024 test envs drive one complete episode each per cell: 245,760 decisions, Table 4's 200,000
+# rounded up to whole episodes, in one pass (64 envs would take 14 passes).
+TEST_ENVS=${TEST_ENVS:-$([ $cpu = 1 ] && echo 4 || echo 1024)}
+JOBS=${JOBS:-$([ $cpu = 1 ] && echo 2 || echo 8)}
+LEARNED=proposed,min,coordinate
+REFERENCES=human,idm_mobil,idm_mobil_limits
+count() { local IFS=,; set -- $1; echo $#; }
+N_SEEDS=$(count "$SEEDS")
+N_SCENARIOS=$(count "$SCENARIOS")
+N_LEARNED=$(count "$LEARNED")
 
 steps=()
 while [ $# -gt 0 ]; do
   if [ "$1" = "--" ]; then shift; break; fi
-  steps+=("$1"); shift
+  if [ "$1" = all ]; then steps+=(check bench references grid collect); else steps+=("$1"); fi
+  shift
 done
 extra=("$@")
 if [ ${#steps[@]} -eq 0 ]; then
-  sed -n '2,29p' "$0"; exit 2
+  sed -n '2,35p' "$0"; exit 2
 fi
 for step in "${steps[@]}"; do
   case $step in
-    check|bench|grid|references|collect) ;;
-    *) echo "unknown step '$step': use check, bench, grid, references or collect" >&2; exit 2 ;;
+    check|bench|references|grid|collect) ;;
+    *) echo "unknown step '$step': use all, or check, bench, references, grid, collect" >&2; exit 2 ;;
   esac
 done
 mkdir -p "$OUT" "$RUNS"
+# The log reaches $OUT line by line: a call cut off at its limit still returns it.
+exec > >(tee -a "$OUT/protocol.log") 2>&1
+log_tee=$!
 
 left() { echo $(( LIMIT_S - ($(date +%s) - START) )); }
 
 install() {
   # The wheels go beside the machine's packages (--target + PYTHONPATH), never over its torch;
-  # --no-deps because the resolution was done by wheelhouse.py. Once per warm machine.
-  if [ ! -f "$SITE/.hgm_repro_wheels" ]; then
-    compgen -G ".whl/*.whl" >/dev/null || {
-      echo "no wheels in .whl/: run python scripts/gpu/wheelhouse.py where pip reaches an index, and carry .whl" >&2
-      exit 2; }
-    "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl
-    touch "$SITE/.hgm_repro_wheels"
-  fi
+  # --no-deps because the resolution was done by wheelhouse.py. Once per machine.
   export PYTHONPATH="$ROOT:$SITE${PYTHONPATH:+:$PYTHONPATH}"
   export PYTHONUNBUFFERED=1
+  if compgen -G ".whl/*.whl" >/dev/null; then
+    if [ ! -f "$SITE/.hgm_repro_wheels" ]; then
+      "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl
+      touch "$SITE/.hgm_repro_wheels"
+    fi
+  elif "$PY" -c "import torchrl, tensordict, hydra, mlflow" 2>/dev/null; then
+    echo "no wheels in .whl/: using the packages $PY already has"
+  else
+    echo "no wheels in .whl/ and $PY lacks torchrl / tensordict / hydra / mlflow: run python" \
+         "scripts/gpu/wheelhouse.py where pip reaches an index, and carry .whl" >&2
+    exit 2
+  fi
 }
 
-# Runs a command for at most the time left; SIGTERM at the limit, SIGKILL 60 s later.
+# Runs a command for at most `seconds` (default: the time left); SIGTERM then, SIGKILL 30 s later.
 bounded() {
-  local seconds
-  seconds=$(left)
-  if [ "$seconds" -le 30 ]; then
-    echo "time limit reached before: $*; run the same command again" >&2; return 124
+  local seconds=$1; shift
+  if [ "$seconds" -le 20 ]; then
+    echo "time limit reached before: $*" >&2; return 124
   fi
-  local rc=0
-  timeout --signal=TERM --kill-after=60 "$seconds" "$@" || rc=$?
+  local rc=0 pid
+  # timeout leads its own process group; once it returns, whatever of that group is left (a sweep's
+  # joblib workers outlive their parent) is killed, so that the next step has the machine to itself.
+  timeout --signal=TERM --kill-after=30 "$seconds" "$@" &
+  pid=$!
+  wait $pid || rc=$?
+  kill -KILL -- -$pid 2>/dev/null || true
   if [ $rc -eq 124 ] || [ $rc -eq 137 ] || [ $rc -eq 143 ]; then
-    echo "stopped at the time limit (LIMIT_S=$LIMIT_S); finished work is kept: run the same command again to resume" >&2
+    echo "stopped after $seconds s (LIMIT_S=$LIMIT_S): finished work is kept" >&2
   fi
   return $rc
 }
 
-sweep() {  # the Hydra sweep in the store folder, every job on $DEVICE at Table 4 scale
-  (cd "$RUNS" && bounded "$PY" -m hgm_repro -m "scenario=$SCENARIOS" "seed=$SEEDS" "experiment=$EXPERIMENT" "device=$DEVICE" \
-     "learner.test_envs=$TEST_ENVS" "$@" "${extra[@]}")
+sweep() {  # a Hydra sweep in the store folder for at most $1 s; never past RESERVE_S before the limit
+  local seconds=$1 models=$2; shift 2
+  if [ "$seconds" -gt $(( $(left) - RESERVE_S )) ]; then seconds=$(( $(left) - RESERVE_S )); fi
+  (cd "$RUNS" && bounded "$seconds" "$PY" -m hgm_repro -m "model=$models" "scenario=$SCENARIOS" \
+     "seed=$SEEDS" "experiment=$EXPERIMENT" "device=$DEVICE" "learner.test_envs=$TEST_ENVS" \
+     launcher=joblib "hydra.launcher.n_jobs=$JOBS" tracking.log_gif=false tracking.log_model=false \
+     "$@" "${extra[@]}")
 }
 
+echo "== protocol: ${steps[*]} on $DEVICE, experiment=$EXPERIMENT, seeds $SEEDS, scenarios $SCENARIOS," \
+     "$TEST_ENVS test envs per cell, LIMIT_S=$LIMIT_S, started $(date -u +%FT%TZ)"
 install
+status=0
 for step in "${steps[@]}"; do
   echo "== $step ($(left) s left)"
   case $step in
     check)
-      "$PY" - <<'EOF' | tee "$OUT/check.txt"
-import importlib, sys, torch
+      "$PY" - "$DEVICE" <<'EOF' || status=1
+import importlib, sys, time, torch
+device = sys.argv[1]
 print("python", sys.version.split()[0], "| torch", torch.__version__, "| cuda", torch.cuda.is_available(),
       torch.cuda.get_device_name(0) if torch.cuda.is_available() else "")
 for name in ("torchrl", "tensordict", "hydra", "omegaconf", "mlflow", "gymnasium", "hgm_repro", "analysis"):
     module = importlib.import_module(name)
     print(f"{name:12s} {getattr(module, '__version__', '')} {module.__file__}")
+from hgm_repro.bench import bench_observations
+start = time.perf_counter()
+row = bench_observations("proposed", 64, torch.device(device), seconds=0.5)
+print(f"simulator + camera + HGM, 64 envs on {device}: {row['env_steps_per_s']} env steps/s "
+      f"({time.perf_counter() - start:.1f} s with set-up)")
 EOF
-      "$PY" -m pip check 2>&1 | tee -a "$OUT/check.txt" || true   # a report, not a gate: --no-deps skipped it
-      bounded "$PY" -m pytest -q -p no:cacheprovider tests -k "cuda or CUDA" 2>&1 | tee -a "$OUT/check.txt"
-      (cd "$RUNS" && bounded "$PY" -m hgm_repro experiment=smoke "device=$DEVICE" "${extra[@]}") 2>&1 | tail -5 \
-        | tee -a "$OUT/check.txt"
+      if [ "$DEVICE" != cpu ]; then
+        bounded 90 "$PY" -m pytest -q -p no:cacheprovider tests/test_simulator.py -k cpu_and_cuda_agree || status=1
+      fi
       ;;
     bench)
-      bounded "$PY" -m hgm_repro.bench --device "$DEVICE" --only simulator --only observations --only learner \
-        --only grouped --cuda-n-envs 8192,32768 --members 1,5,15 | tee "$OUT/bench.jsonl"
-      ;;
-    grid)
-      sweep model=proposed,min,coordinate
+      if [ $cpu = 1 ]; then sizes=(--n-envs 256 --obs-n-envs 256 --rate-steps 64 --seconds 1)
+      else sizes=(--cuda-n-envs 8192 --obs-n-envs 8192,32768 --rate-steps 4096 --seconds 2); fi
+      cap=$(left)
+      if [ "$cap" -gt "$BENCH_S" ]; then cap=$BENCH_S; fi
+      bounded "$cap" "$PY" -m hgm_repro.bench --device "$DEVICE" --only simulator --only observations \
+        --variants proposed --only rate --only grouped_update "${sizes[@]}" --preset "$EXPERIMENT" \
+        --rate-members "$N_SEEDS" --update-members $(( N_LEARNED * N_SEEDS )) \
+        ${UPDATE_MODES:+--update-modes "$UPDATE_MODES"} | tee "$OUT/bench.jsonl" || status=1
       ;;
     references)
-      sweep model=human,idm_mobil,idm_mobil_limits
+      # At most REFERENCES_S (a third of the time left): cells it leaves are missing from the
+      # report, while the learned models keep their time. Its seconds per finished cell size the
+      # grid's test cells.
+      begin=$(date +%s)
+      sweep "${REFERENCES_S:-$(( ($(left) - RESERVE_S) / 3 ))}" "$REFERENCES" | tee "$RUNS/references.log" || status=1
+      echo "$(( $(date +%s) - begin )) $(grep -c "job end: " "$RUNS/references.log" || true)" > "$RUNS/references_s"
+      ;;
+    grid)
+      budget=()
+      if [ -n "${TOTAL_STEPS:-}" ]; then
+        budget=("learner.total_steps=$TOTAL_STEPS")
+        echo "training budget: TOTAL_STEPS=$TOTAL_STEPS (given)"
+      else
+        measured=()
+        if [ -f "$RUNS/references_s" ]; then
+          read -r seconds cells < "$RUNS/references_s"
+          if [ "$cells" -gt 0 ]; then measured=(--reference-seconds "$seconds" --reference-cells "$cells"); fi
+        fi
+        # The rule itself is scripts/gpu/budget.py; 30 s of the reserve go to the sweep's own start.
+        read -r -a budget < <("$PY" scripts/gpu/budget.py --bench "$OUT/bench.jsonl" --seconds-left "$(left)" \
+          --preset "$EXPERIMENT" --device "$DEVICE" --groups "$N_LEARNED" \
+          --test-cells $(( N_LEARNED * N_SEEDS * N_SCENARIOS )) "${measured[@]}" --reserve $(( RESERVE_S + 30 )) --json "$OUT/budget.json") || true
+      fi
+      if [ ${#budget[@]} -eq 0 ]; then
+        echo "no training budget (scripts/gpu/budget.py failed): the grid is not run" >&2; status=1; continue
+      fi
+      # Each model's seeds train as one group; no validation passes (the paper tests final.pt).
+      sweep "$(left)" "$LEARNED" learner.grouped=true learner.eval_every=0 eval.checkpoint=final "${budget[@]}" \
+        | tee "$RUNS/grid.log" || status=1
+      # What the trainings reached (a cut-off one stops short of the budget):
+      grep -o "grouped training '[a-z_]*': [0-9]*/[0-9]* env steps per member" "$RUNS/grid.log" \
+        | awk '{last[$3] = $0} END {for (m in last) print "reached: " last[m]}' || true
       ;;
     collect)
       rm -rf "$RUNS/bundle"
-      (cd "$RUNS" && bounded "$PY" -m analysis --write-bundle "$RUNS/bundle" --out "$RUNS/bundle/report")
-      tar -czf "$OUT/results.tgz" -C "$RUNS" bundle
-      echo "results: $OUT/results.tgz (unpack into docs/results/ here: tar -xzf results.tgz --strip-components=1 -C docs/results)"
+      (cd "$RUNS" && bounded "$(left)" "$PY" -m analysis --write-bundle "$RUNS/bundle" --out "$RUNS/bundle/report") \
+        || status=1
+      if [ -d "$RUNS/bundle" ]; then
+        tar -czf "$OUT/results.tgz" -C "$RUNS" bundle
+        if [ -f "$RUNS/bundle/report/report.pdf" ]; then cp "$RUNS/bundle/report/report.pdf" "$OUT/report.pdf"; fi
+        echo "results: $OUT/results.tgz (here: tar -xzf results.tgz --strip-components=1 -C docs/results/gpu)"
+      fi
       ;;
   esac
 done
-echo "== done in $(( $(date +%s) - START )) s"
+echo "== done in $(( $(date +%s) - START )) s of LIMIT_S=$LIMIT_S, status $status; in $OUT: $(ls "$OUT" | tr '\n' ' ')"
+exec >&- 2>&-
+wait "$log_tee" 2>/dev/null || true  # the log's last line is in $OUT before the call returns
+exit $status
