@@ -95,7 +95,10 @@ def paint_ranks(geom: GridGeometry, rel_lon: torch.Tensor, lat: torch.Tensor, ha
     # goes. K is read back to the host (one sync on CUDA) so that the work shrinks with it.
     k = max(1, int(shown.sum(1).max()))
     score = torch.where(shown, -priority, torch.full_like(priority, -float("inf")))
-    top, order = torch.topk(score, k, dim=1, largest=True, sorted=True)
+    # A stable sort, not topk: vehicles of equal priority (the same distance from the host) then
+    # rank in slot order, the lower slot winning the cells they share, on every device.
+    top, order = torch.sort(score, dim=1, descending=True, stable=True)
+    top, order = top[:, :k], order[:, :k]
     keep = torch.isfinite(top)
     rel_lon, lat = rel_lon.gather(1, order), lat.gather(1, order)
     half_len, half_wid = half_len.gather(1, order), half_wid.gather(1, order)
