@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Integration tests against real services: an MLflow tracking server backed by PostgreSQL, and the
-# MLflow UI in headless Chromium, started by the tests themselves on loopback. Installs what a
-# fresh machine lacks.
+# Integration tests against real services: an MLflow tracking server backed by PostgreSQL, the MLflow
+# UI in headless Chromium, a single-node SLURM cluster and a local Ray cluster, each started by the
+# tests themselves on loopback and stopped after them. Installs what a fresh machine lacks (apt-get, pip).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -28,4 +28,16 @@ if ! python -c "import psycopg2" 2>/dev/null; then
     python -m pip install -q "psycopg2-binary>=2.9"
 fi
 
+# A single-node SLURM cluster (tests/test_integration_clusters.py starts and stops its daemons):
+# Debian's slurm-wlm, slurmdbd, munge and mariadb-server (slurmdbd keeps accounting for sacct).
+bash .ci/slurm_cluster.sh install
+
+# Ray: the `ray` extra, installed here only (it holds cloudpickle below 3 and so joblib below 1.6,
+# which the default install does not need). Into the active environment: CI's own .ci-venv.
+if ! python -c "import hydra_plugins.hydra_ray_launcher, ray" 2>/dev/null; then
+    python -m pip install -q -e ".[ray]"
+fi
+
+start=$(date +%s)
 python -m pytest -m integration -p no:cacheprovider "$@"
+echo "integration tests: $(( $(date +%s) - start )) s"

@@ -18,6 +18,7 @@ import tempfile
 import time
 import urllib.request
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
@@ -47,8 +48,8 @@ def as_postgres_user(cmd: list[str]) -> list[str]:
     return ["runuser", "-u", "postgres", "--", *cmd] if os.geteuid() == 0 else cmd
 
 
-@pytest.fixture
-def postgres() -> Iterator[str]:
+@contextmanager
+def postgres_cluster() -> Iterator[str]:
     """A throwaway cluster on 127.0.0.1:<free port>; yields its SQLAlchemy URI."""
     root = Path(tempfile.mkdtemp(prefix="hgm_pg_"))  # under /tmp, reachable by the postgres user
     if os.geteuid() == 0:
@@ -69,8 +70,9 @@ def postgres() -> Iterator[str]:
         shutil.rmtree(root, ignore_errors=True)
 
 
-@pytest.fixture
-def mlflow_server(postgres: str, tmp_path: Path) -> Iterator[str]:
+@contextmanager
+def mlflow_server_on(postgres: str, tmp_path: Path) -> Iterator[str]:
+    """An MLflow server on 127.0.0.1:<free port> over `postgres`, its artifacts in `tmp_path`; yields its URL."""
     port = free_port()
     log = open(tmp_path / "mlflow_server.log", "w")  # noqa: SIM115 - closed below
     server = subprocess.Popen(
@@ -96,6 +98,18 @@ def mlflow_server(postgres: str, tmp_path: Path) -> Iterator[str]:
     finally:
         stop_group(server)
         log.close()
+
+
+@pytest.fixture
+def postgres() -> Iterator[str]:
+    with postgres_cluster() as uri:
+        yield uri
+
+
+@pytest.fixture
+def mlflow_server(postgres: str, tmp_path: Path) -> Iterator[str]:
+    with mlflow_server_on(postgres, tmp_path) as url:
+        yield url
 
 
 def stop_group(process: subprocess.Popen) -> None:

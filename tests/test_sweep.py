@@ -106,6 +106,15 @@ def test_small_parallel_sweep_trains_each_key_once(tmp_path: Path) -> None:
         "hydra/launcher=joblib", "hydra.launcher.n_jobs=2")
     runs = check_sweep(tmp_path, trainings=1, evaluations=4)
     assert sorted(r.data.tags["training"] for r in by_stage(runs, "eval")) == ["none", "none", "reused", "trained"]
+    # Each job's own config names the parent run too: a worker that does not inherit the launching
+    # process's environment (Ray's, on a cluster started beforehand) still finds it.
+    from omegaconf import OmegaConf
+
+    (parent,) = [r for r in runs if r.data.tags.get("sweep") == "true"]
+    saved = sorted(tmp_path.glob("multirun/*/*/*/.hydra/hydra.yaml"))
+    assert len(saved) == 4
+    for path in saved:
+        assert OmegaConf.load(path).hydra.job.env_set["HGM_REPRO_PARENT_RUN_ID"] == parent.info.run_id
     # A second launch finds every training finished: it only evaluates.
     hgm(tmp_path, "experiment=smoke", "model=proposed", "scenario=3")
     assert len(by_stage(store_runs(tmp_path), "train")) == 1

@@ -33,7 +33,7 @@ from typing import Any, TypeVar
 
 from filelock import FileLock, Timeout
 from hydra.experimental.callback import Callback
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
 from .. import PACKAGE_ROOT
 from .config_tree import flatten as flatten_tree
@@ -623,6 +623,18 @@ def _sweep_jobs(config: DictConfig) -> list[Any]:
     return jobs
 
 
+def _hand_to_jobs(config: DictConfig, name: str, value: str) -> None:
+    """Set environment variable `name` in every job of this sweep, wherever it runs.
+
+    A worker of a Ray cluster started beforehand (`ray start`) does not inherit this process's
+    environment. Every launcher builds each job's config from the sweep's Hydra overrides
+    (`load_sweep_config`), and Hydra sets `hydra.job.env_set` in the job's process around the task,
+    so an override added here (the callback runs before the sweeper and launcher are set up, on the
+    same config) reaches the job on any node."""
+    with open_dict(config.hydra), read_write(config.hydra):
+        config.hydra.overrides.hydra.append(f"++hydra.job.env_set.{name}={value}")
+
+
 class SweepTracking(Callback):
     """Hydra callback: one MLflow parent run per sweep, created before any job starts.
 
@@ -659,7 +671,8 @@ class SweepTracking(Callback):
             {**launch_tags("sweep", overrides), "sweep_dir": str(Path(sweep_dir).resolve())},
             description=self._description,
         )
-        os.environ[PARENT_RUN_ENV] = self._parent
+        os.environ[PARENT_RUN_ENV] = self._parent  # joblib's and submitit's workers inherit it
+        _hand_to_jobs(config, PARENT_RUN_ENV, self._parent)
         # A sweep that raises never reaches on_multirun_end: close the parent run anyway.
         atexit.register(self._close, "FAILED")
         serve = tracker.ui_command()
