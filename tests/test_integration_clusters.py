@@ -38,14 +38,15 @@ GRID = ("-m", "experiment=smoke", "model=proposed", f"scenario={','.join(SCENARI
         "tracking.log_gif=false", "tracking.log_model=false", "learner.torch_threads=1")
 # SLURM: a training longer than one attempt (75-170 s on a 2-core machine, by its load), so that the
 # time-limit signal reaches it, with checkpoints every few seconds so that each attempt makes progress.
-SLURM_STEPS = 10240
+SLURM_STEPS = 20480
 SLURM_TRAINING = (f"learner.total_steps={SLURM_STEPS}", f"learner.eps_steps={SLURM_STEPS}", "learner.eval_every=0",
                   "learner.checkpoint_every=256", "learner.log_every=256")
 # A 2-minute limit with the signal 55 s before it: slurmctld checks limits every 30 s and sends the
 # signal up to one check early, so it comes 35-65 s into every attempt (one job start is 8-15 s of
-# imports): a first attempt trains at most ~57 s, less than 10,240 steps below 175 steps/s (60-135
-# measured here). Each requeue costs one of max_num_timeout; the job waiting for the training is
-# requeued too.
+# imports): a first attempt trains at most ~57 s, less than 20,480 steps below 350 steps/s (60-135
+# measured here under load; an idle CI machine is faster, hence twice the steps first chosen), and
+# at 60 steps/s the training ends in its 7th attempt. Each requeue costs one of max_num_timeout; the
+# job waiting for the training is requeued too.
 SLURM_LIMITS = ("hydra.launcher.timeout_min=2", "hydra.launcher.signal_delay_s=55", "hydra.launcher.max_num_timeout=15",
                 "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=2", "hydra.launcher.array_parallelism=2")
 
