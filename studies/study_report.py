@@ -19,10 +19,13 @@ from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
 from analysis.stats import mean_ci  # noqa: E402
+from hgm_repro.experiment.train_key import NON_TRAINING_LEARNER_KEYS  # noqa: E402
 
 # Training curves (with exploration) and the greedy validation return (no exploration, seeds no
 # test uses): the second shows when a host has learned, the first how it explored.
 CURVES = ("train/episode_return", "train/collisions", "train/avg_speed_kmh", "val/episode_return")
+# The moving average's validation (arms with learner.ema_decay), drawn dashed beside the online network's.
+EMA_CURVE = "val_ema/episode_return"
 RESULTS = ("episode_return", "collisions", "dangerous_actions", "avg_speed_kmh", "lane_changes", "overtakes")
 
 
@@ -47,10 +50,18 @@ def arm_signatures() -> dict[str, dict[str, object]]:
 
 def _arm_of(params: dict[str, str], signatures: dict[str, dict[str, object]]) -> str | None:
     for arm, signature in signatures.items():
-        if all(_value(params[k]) == v if k in params else v == signature_default(k, signatures)
+        if all(_value(params[k]) == v if k in params else
+               (_not_recorded_by_training(k) or v == signature_default(k, signatures))
                for k, v in signature.items()):
             return arm
     return None
+
+
+def _not_recorded_by_training(key: str) -> bool:
+    """A training run does not log the learner values that do not change what it learns (such as
+    `learner.val_envs`): their absence says nothing about the arm."""
+    group, _, name = key.partition(".")
+    return group == "learner" and name in NON_TRAINING_LEARNER_KEYS
 
 
 def signature_default(key: str, signatures: dict[str, dict[str, object]]) -> object:
@@ -81,7 +92,7 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                     arm = f"{arm}@{checkpoint}"
                 results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
             elif tags.get("stage") == "train":
-                for m in CURVES:
+                for m in (*CURVES, EMA_CURVE):
                     for point in client.get_metric_history(r.info.run_id, m):
                         curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step,
                                        "value": point.value})
@@ -134,6 +145,7 @@ def _validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path
     training reaches it. Validation and test draw different traffic (seeds + 200000 and + 100000),
     so the line is a reference level, not the same episodes."""
     val = curves[curves["metric"] == "val/episode_return"]
+    ema = curves[curves["metric"] == EMA_CURVE]
     seeds = sorted(val["seed"].unique())
     if not seeds:
         return
@@ -143,6 +155,10 @@ def _validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path
         for arm in [a for a in ARMS if a in set(on_seed["arm"])]:
             points = on_seed[on_seed["arm"] == arm].sort_values("step")
             ax.plot(points["step"], points["value"], marker=".", color=f"C{list(ARMS).index(arm) % 10}", label=arm)
+            averaged = ema[(ema["seed"] == seed) & (ema["arm"] == arm)].sort_values("step")
+            if len(averaged):
+                ax.plot(averaged["step"], averaged["value"], marker=".", linestyle="--",
+                        color=f"C{list(ARMS).index(arm) % 10}", label=f"{arm}, moving average")
         human = results[(results["arm"] == "human") & (results["seed"] == seed)]["episode_return"]
         if len(human):
             ax.axhline(float(human.iloc[0]), color="black", linestyle="--", linewidth=1,
