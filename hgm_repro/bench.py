@@ -369,7 +369,7 @@ def bench_grouped_update(device: torch.device, seconds: float, members: int, mod
     from tensordict import TensorDict
     from torch.func import stack_module_state
 
-    from .learner.builders import make_network
+    from .learner.builders import make_network, make_optimizer
 
     # The grouped learner's own loss and clipping (its update loop is not a function of its own).
     from .learner.grouped import _clip_per_member, _stacked_loss
@@ -386,7 +386,7 @@ def bench_grouped_update(device: torch.device, seconds: float, members: int, mod
     names = list(params)
     target = {n: p.detach().clone() for n, p in params.items()}
     base = copy.deepcopy(nets[0]).to("meta")
-    optimizer = torch.optim.Adam([params[n] for n in names], lr=L.lr, capturable=mode == "cuda_graph")
+    optimizer = make_optimizer(L, [params[n] for n in names], capturable=mode == "cuda_graph")
     in_keys = list(nets[0].in_keys)
     loss_fn = _stacked_loss(base, in_keys, L.gamma, L.double_dqn, L.loss_function)
     h, w, f, b = job.observation.height, job.observation.width, job.observation.frame_stack, L.batch_size
