@@ -21,7 +21,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.load import StoreData, _seed_value
-from hgm_repro.metrics import REPORTED_METRICS, RUN_TAGS
+from hgm_repro.contracts.names import REPORTED_METRICS, RUN_TAGS
 
 # Bump when a file, a column's meaning or the manifest changes shape; older bundles then fail
 # loudly instead of building a wrong report.

@@ -17,8 +17,8 @@ import pandas as pd
 from mlflow import MlflowClient
 from mlflow.entities import ViewType
 
-from hgm_repro.metrics import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
-from hgm_repro.metrics import RUN_TAGS as TAG_COLUMNS
+from hgm_repro.contracts.names import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
+from hgm_repro.contracts.names import RUN_TAGS as TAG_COLUMNS
 
 
 class EmptyStoreError(RuntimeError):

@@ -37,7 +37,7 @@ def _to_hwc(img: Any) -> np.ndarray:
 def _observation_settings() -> dict[str, Any]:
     import yaml
 
-    from hgm_repro import CONF_DIR
+    from hgm_repro.contracts.config_files import CONF_DIR
 
     return dict(yaml.safe_load((Path(CONF_DIR) / "config.yaml").read_text()).get("observation", {}))
 
@@ -45,9 +45,9 @@ def _observation_settings() -> dict[str, Any]:
 def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
     import torch
 
+    from hgm_repro.contracts.config_files import scenario_config, simulator_config
     from hgm_repro.observations import ObservationBuilder, ObservationConfig
     from hgm_repro.simulator import Action, HighwaySimulator
-    from hgm_repro.simulator.loading import scenario_config, simulator_config
 
     sim_cfg = simulator_config()
     sim = HighwaySimulator(sim_cfg, scenario_config(scenario, sim_cfg), n_envs=1, seed=seed)

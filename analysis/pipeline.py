@@ -22,7 +22,7 @@ from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import ReportInputs, fmt_estimate, write_report
 from analysis.scale import is_smoke, scale_text
 from analysis.stats import mean_ci
-from hgm_repro.experiment.config_tree import flatten
+from hgm_repro.contracts.config_tree import flatten
 
 
 @dataclass
@@ -45,7 +45,7 @@ def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFram
             source = "from the logged params of the runs"
     if not flat:
         try:
-            from hgm_repro import CONF_DIR
+            from hgm_repro.contracts.config_files import CONF_DIR
 
             flat = flatten(yaml.safe_load((Path(CONF_DIR) / "simulator" / "highway.yaml").read_text()))
             source = "from conf/simulator/highway.yaml: the runs did not log them"

@@ -19,7 +19,7 @@ from mlflow import MlflowClient
 from mlflow.entities import Metric, Param
 
 from analysis.labels import CV_RATIO, LEARNED
-from hgm_repro.metrics import REPORTED_METRICS as EPISODE_COLUMNS
+from hgm_repro.contracts.names import REPORTED_METRICS as EPISODE_COLUMNS
 
 
 @dataclass

@@ -11,7 +11,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from hgm_repro.networks import PAPER_CONV, PAPER_HIDDEN, DuelingHead, ImageEncoder, decode_camera, mlp
+from hgm_repro.models.networks import PAPER_CONV, PAPER_HIDDEN, DuelingHead, ImageEncoder, decode_camera, mlp
 
 
 class CoordinateDuelingQNet(nn.Module):

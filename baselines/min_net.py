@@ -7,7 +7,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from hgm_repro.networks import PAPER_CONV, PAPER_HIDDEN, DuelingHead, ImageEncoder, decode_camera
+from hgm_repro.models.networks import PAPER_CONV, PAPER_HIDDEN, DuelingHead, ImageEncoder, decode_camera
 
 
 class MinDuelingQNet(nn.Module):

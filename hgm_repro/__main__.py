@@ -1,7 +1,7 @@
 """`python -m hgm_repro`: one job (or, with -m, a sweep of jobs) of the reproduction.
 
 Kept thin so that `--help` and `--cfg job` answer without importing torch or MLflow;
-the job itself lives in `hgm_repro.experiment.job`. A single run's config, and each job of a
+the job itself lives in `hgm_repro.app.job`. A single run's config, and each job of a
 `-m` grid, is composed and validated here first, so that a bad value or an unknown key stops with
 one line on stderr and exit code 2 before Hydra makes its output directory and before any store,
 run or checkpoint exists.
@@ -18,7 +18,8 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig
 
-from hgm_repro import CONF_DIR
+from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.errors import BAD_INPUT_EXIT
 
 _GROUP_OVERRIDE = re.compile(r"^(?P<key>[~+]?(?P<group>[A-Za-z_][\w/]*)(@[\w.]+)?)=(?P<value>[\d.]+(,[\d.]+)*)$")
 
@@ -39,14 +40,13 @@ def quote_numeric_choices(argv: list[str]) -> list[str]:
     return out
 
 
-CONFIG_ERROR_EXIT = 2  # like argparse: the command line asked for something that does not exist
 
 
 def config_problem(overrides: list[str]) -> str | None:
     """Why the config of a single run with these overrides cannot run, in one line; None if it can.
 
     Hydra's own errors (an unknown group option or key, a malformed override) and the job's
-    schema (`hgm_repro.experiment.schema.validate`) are both checked, without importing torch.
+    schema (`hgm_repro.contracts.schema.validate`) are both checked, without importing torch.
     """
     from hydra import initialize_config_dir
 
@@ -96,7 +96,7 @@ def _problem(overrides: list[str]) -> str | None:
     from hydra.errors import HydraException, MissingConfigException
     from omegaconf.errors import OmegaConfBaseException
 
-    from hgm_repro.simulator.config import ConfigError
+    from hgm_repro.contracts.errors import ConfigError
 
     try:
         return _composed_problem(overrides)
@@ -113,7 +113,7 @@ def _composed_problem(overrides: list[str]) -> str | None:
     `+key=value` added (Hydra accepts them; nothing reads them, so a typo would pass silently)."""
     from hydra import compose
 
-    from hgm_repro.experiment.schema import validate
+    from hgm_repro.contracts.schema import validate
 
     added = [o.split("=", 1)[0].lstrip("+") for o in overrides if o.startswith("+") and "=" in o]
     added = [key for key in added if not _is_group(key) and not key.startswith("hydra")]
@@ -146,7 +146,7 @@ def _not_a_key(key: str, other_overrides: list[str]) -> str:
     from hydra import compose
     from omegaconf import OmegaConf
 
-    from hgm_repro.experiment.config_tree import flatten
+    from hgm_repro.contracts.config_tree import flatten
 
     try:
         cfg = compose("config", overrides=other_overrides)
@@ -195,7 +195,7 @@ def _is_plain_sweep(argv: list[str]) -> bool:
 
 @hydra.main(config_path=str(CONF_DIR), config_name="config", version_base="1.3")
 def _hydra_main(cfg: DictConfig) -> float | None:
-    from hgm_repro.experiment.job import hydra_job
+    from hgm_repro.app.job import hydra_job
 
     return hydra_job(cfg)
 
@@ -206,12 +206,12 @@ def main() -> float | None:
         problem = config_problem(argv)
         if problem is not None:
             print(f"hgm_repro: {problem}", file=sys.stderr)
-            raise SystemExit(CONFIG_ERROR_EXIT)
+            raise SystemExit(BAD_INPUT_EXIT)
     elif _is_plain_sweep(argv):
         problem = sweep_problem([arg for arg in argv if not arg.startswith("-")])
         if problem is not None:
             print(f"hgm_repro: {problem}; nothing was launched", file=sys.stderr)
-            raise SystemExit(CONFIG_ERROR_EXIT)
+            raise SystemExit(BAD_INPUT_EXIT)
     sys.argv = [sys.argv[0], *argv]
     return _hydra_main()
 

@@ -24,8 +24,8 @@ from typing import Any
 
 import torch
 
+from .contracts.config_files import scenario_config, simulator_config
 from .simulator import HOST, HighwaySimulator
-from .simulator.loading import scenario_config, simulator_config
 
 OBS_VARIANTS = {  # name -> the model streams it stands for
     "hgm": dict(camera="none", hgm="paper", coordinates=False),
@@ -192,8 +192,8 @@ def _compose(*overrides: str) -> Any:
     """The validated `JobConfig` of the root config plus `overrides`."""
     from hydra import compose, initialize_config_dir
 
-    from . import CONF_DIR
-    from .experiment.schema import validate
+    from .contracts.config_files import CONF_DIR
+    from .contracts.schema import validate
 
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         return validate(compose("config", overrides=list(overrides)))
@@ -205,7 +205,8 @@ def bench_learner_updates(device: torch.device, seconds: float, batch_size: int 
     built by the learner's own builders; `mode` is eager, compile or cuda_graph."""
     from tensordict import TensorDict
 
-    from .learner.builders import make_actor, make_loss, make_network, make_optimizer, make_update
+    from .learner.builders import make_loss, make_optimizer, make_update
+    from .models.builders import make_actor, make_network
     from .simulator import N_ACTIONS
 
     job = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
@@ -281,7 +282,7 @@ def _train_member(device: str, total_steps: int, seed: int, threads: int, direct
     """Train one member alone (in whichever process calls it); its (env steps, updates)."""
     from pathlib import Path
 
-    from .experiment.checkpoint import load_checkpoint
+    from .contracts.checkpoint import load_checkpoint
     from .learner import train
 
     job = _member_job(torch.device(device), total_steps, seed, threads)
@@ -306,7 +307,7 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
     from multiprocessing import get_context
     from pathlib import Path
 
-    from .experiment.checkpoint import load_checkpoint
+    from .contracts.checkpoint import load_checkpoint
     from .learner.grouped import train_group
 
     if path not in GROUPED_PATHS:
@@ -369,10 +370,11 @@ def bench_grouped_update(device: torch.device, seconds: float, members: int, mod
     from tensordict import TensorDict
     from torch.func import stack_module_state
 
-    from .learner.builders import make_network, make_optimizer
+    from .learner.builders import make_optimizer
 
     # The grouped learner's own loss and clipping (its update loop is not a function of its own).
     from .learner.grouped import _clip_per_member, _stacked_loss
+    from .models.builders import make_network
     from .simulator import N_ACTIONS
 
     if mode not in GROUPED_UPDATE_MODES:

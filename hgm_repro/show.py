@@ -89,11 +89,10 @@ def still(args: dict[str, str]) -> Path:
     import matplotlib.pyplot as plt
     from omegaconf import OmegaConf
 
-    from hgm_repro import CONF_DIR
+    from hgm_repro.contracts.config_files import CONF_DIR, scenario_config, simulator_config
     from hgm_repro.envs.render import hgm_colour_limit, render_top_down
     from hgm_repro.observations import ObservationBuilder, ObservationConfig, decode_hgm, hyper_grid_matrix
     from hgm_repro.simulator import HOST, HighwaySimulator
-    from hgm_repro.simulator.loading import scenario_config, simulator_config
 
     env, steps = int(args["env"]), int(args["steps"] or STILL_STEPS)
     root = OmegaConf.load(CONF_DIR / "config.yaml")
@@ -167,10 +166,10 @@ def watch(args: dict[str, str]) -> Path:
     """An animation of a trained host driving one episode; the path it was written to."""
     from omegaconf import open_dict
 
+    from hgm_repro.contracts.checkpoint import CheckpointMismatchError
+    from hgm_repro.contracts.errors import ConfigError
+    from hgm_repro.contracts.schema import validate
     from hgm_repro.evaluation.media import record_gif
-    from hgm_repro.experiment.checkpoint import CheckpointMismatchError
-    from hgm_repro.experiment.schema import validate
-    from hgm_repro.simulator.config import ConfigError
 
     scenario = _scenario_node(args["scenario"])  # the arguments first: nothing is fetched for a bad one
     fmt = args["format"]
@@ -205,7 +204,7 @@ def watch(args: dict[str, str]) -> Path:
 def _scenario_node(name: str) -> Any:
     from omegaconf import OmegaConf
 
-    from hgm_repro import CONF_DIR
+    from hgm_repro.contracts.config_files import CONF_DIR
 
     path = CONF_DIR / "scenario" / f"{name}.yaml"
     if not path.is_file():
@@ -220,8 +219,8 @@ def _from_run(run_id: str, tracking_uri: str) -> tuple[Any, Path]:
 
     from omegaconf import OmegaConf
 
-    from hgm_repro.experiment.job import local_checkpoint
-    from hgm_repro.experiment.tracking import Tracker, resolve_location
+    from hgm_repro.app.job import local_checkpoint
+    from hgm_repro.app.store import Tracker, resolve_location
 
     location = resolve_location({"uri": tracking_uri or None}, Path.cwd())
     db = location.tracking_uri.removeprefix("sqlite:///")
@@ -254,8 +253,8 @@ def _from_checkpoint(path: Path, model: str) -> Any:
     from hydra import compose, initialize_config_dir
     from omegaconf import OmegaConf, open_dict
 
-    from hgm_repro import CONF_DIR
-    from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint
+    from hgm_repro.contracts.checkpoint import CheckpointMismatchError, load_checkpoint
+    from hgm_repro.contracts.config_files import CONF_DIR
 
     if not path.is_file():
         raise WatchError(f"no checkpoint at {path}")

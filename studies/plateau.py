@@ -30,8 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from incidents import COLLISION_KINDS, DANGER_KINDS, drive_and_classify  # noqa: E402
 
 from baselines.drivers import IdmMobilDriver  # noqa: E402
-from hgm_repro.experiment.schema import JobConfig, validate  # noqa: E402
-from hgm_repro.learner.builders import make_network  # noqa: E402
+from hgm_repro.contracts.schema import JobConfig, validate  # noqa: E402
+from hgm_repro.models.builders import make_network  # noqa: E402
 from hgm_repro.observations import ObservationBuilder  # noqa: E402
 from hgm_repro.simulator import HOST, HighwaySimulator  # noqa: E402
 from hgm_repro.simulator.driver import attach  # noqa: E402

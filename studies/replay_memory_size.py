@@ -14,9 +14,9 @@ import json
 import torch
 from hydra import compose, initialize_config_dir
 
-from hgm_repro import CONF_DIR
+from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.schema import validate
 from hgm_repro.envs import make_env
-from hgm_repro.experiment.schema import validate
 from hgm_repro.learner.builders import make_replay_buffer
 from hgm_repro.learner.frame_replay import FrameReplay
 from hgm_repro.learner.n_step import NStepReturns

@@ -14,12 +14,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
-from learner_study import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
 from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
+from study_arms import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
 
 from analysis.stats import mean_ci  # noqa: E402
-from hgm_repro.experiment.train_key import NON_TRAINING_LEARNER_KEYS  # noqa: E402
+from hgm_repro.contracts.train_key import NON_TRAINING_LEARNER_KEYS  # noqa: E402
 
 # Training curves (with exploration) and the greedy validation return (no exploration, seeds no
 # test uses): the second shows when a host has learned, the first how it explored.

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import torch
 
+from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.simulator import HOST, HighwaySimulator
-from hgm_repro.simulator.loading import scenario_config, simulator_config
 
 
 def make_sim(n_envs: int = 1, scenario: str = "train", seed: int = 0, **overrides) -> HighwaySimulator:

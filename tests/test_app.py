@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 import yaml
 
-from hgm_repro import CONF_DIR
 from hgm_repro.__main__ import quote_numeric_choices
+from hgm_repro.contracts.config_files import CONF_DIR
 
 REPO_ROOT = CONF_DIR.parent
 

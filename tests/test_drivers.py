@@ -7,9 +7,8 @@ import torch
 import yaml
 
 from baselines.drivers import HumanDriver, IdmMobilDriver, RandomDriver, attach, drive
-from hgm_repro import CONF_DIR
+from hgm_repro.contracts.config_files import CONF_DIR, simulator_config
 from hgm_repro.simulator import N_ACTIONS, Action, HighwaySimulator
-from hgm_repro.simulator.loading import simulator_config
 
 from .sim_helpers import empty_road, make_sim, place
 

@@ -6,11 +6,11 @@ import pytest
 import torch
 from tensordict import TensorDict
 
+from hgm_repro.contracts.checkpoint import CheckpointMismatchError
+from hgm_repro.contracts.config_files import scenario_config
 from hgm_repro.evaluation import EPISODE_METRICS, evaluate
 from hgm_repro.evaluation.episodes import episodes_per_env
-from hgm_repro.experiment.checkpoint import CheckpointMismatchError
 from hgm_repro.learner import train
-from hgm_repro.simulator.loading import scenario_config
 
 from .test_learner import Recorder, compose_job
 

@@ -7,8 +7,8 @@ import pytest
 import torch
 from torchrl.collectors import Collector
 
+from hgm_repro.contracts.checkpoint import load_checkpoint
 from hgm_repro.envs import make_env
-from hgm_repro.experiment.checkpoint import load_checkpoint
 from hgm_repro.learner import train
 from hgm_repro.learner.builders import make_replay_buffer
 from hgm_repro.learner.frame_replay import FrameReplay

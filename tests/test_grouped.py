@@ -10,12 +10,13 @@ import torch
 from tensordict import TensorDict
 from torch.func import stack_module_state
 
-from hgm_repro.experiment.checkpoint import load_checkpoint
+from hgm_repro.contracts.checkpoint import load_checkpoint
+from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.learner import train
-from hgm_repro.learner.builders import make_actor, make_loss, make_network
+from hgm_repro.learner.builders import make_loss
 from hgm_repro.learner.grouped import _load_target_into, _stacked_loss, _update_inputs, check_group, train_group
+from hgm_repro.models.builders import make_actor, make_network
 from hgm_repro.simulator import HighwaySimulator
-from hgm_repro.simulator.loading import scenario_config, simulator_config
 
 from .test_learner import Recorder, compose_job
 
@@ -151,16 +152,16 @@ def test_grouped_training_resumes_every_member(tmp_path: Path):
 
 
 def test_grouped_setting_changes_neither_train_key_nor_evaluation_key():
-    from hgm_repro.experiment.train_key import evaluation_key, train_key
+    from hgm_repro.contracts.train_key import evaluation_key, train_key
 
     solo, grouped = compose_job("learner.grouped=false"), compose_job("learner.grouped=true")
     assert train_key(solo) == train_key(grouped) and evaluation_key(solo) == evaluation_key(grouped)
 
 
 def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
-    from hgm_repro.experiment.schema import validate
+    from hgm_repro.contracts.errors import ConfigError
+    from hgm_repro.contracts.schema import validate
     from hgm_repro.learner.grouped import use_grouped
-    from hgm_repro.simulator.config import ConfigError
 
     from .test_learner import compose_cfg
 
@@ -171,9 +172,9 @@ def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
 
 
 def test_bf16_update_is_cuda_only_and_float32_keeps_the_keys():
-    from hgm_repro.experiment.schema import validate
-    from hgm_repro.experiment.train_key import evaluation_key, train_key
-    from hgm_repro.simulator.config import ConfigError
+    from hgm_repro.contracts.errors import ConfigError
+    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.train_key import evaluation_key, train_key
 
     from .test_learner import compose_cfg
 

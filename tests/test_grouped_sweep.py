@@ -53,7 +53,7 @@ def test_grouped_grid_killed_mid_training_then_rerun(tmp_path: Path) -> None:
 
 
 def test_grouped_grid_stopped_by_sigterm_checkpoints_every_member_then_resumes(tmp_path: Path) -> None:
-    from hgm_repro.experiment.checkpoint import load_checkpoint
+    from hgm_repro.contracts.checkpoint import load_checkpoint
 
     log = tmp_path / "first.log"
     sweep = subprocess.Popen(command(*GRID), cwd=tmp_path, env=environment(), stdout=log.open("w"),

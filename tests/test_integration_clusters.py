@@ -84,7 +84,7 @@ def check_store(url: str, experiment_name: str, launch_dir: Path, total_steps: i
     run, nothing left RUNNING, each training metric step logged once, final.pt at the full step count."""
     from mlflow.tracking import MlflowClient
 
-    from hgm_repro.experiment.checkpoint import load_checkpoint
+    from hgm_repro.contracts.checkpoint import load_checkpoint
 
     client = MlflowClient(tracking_uri=url)
     experiment = client.get_experiment_by_name(experiment_name)

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import pytest
 
-from hgm_repro import CONF_DIR
+from hgm_repro.contracts.config_files import CONF_DIR
 
 pytestmark = pytest.mark.integration
 REPO_ROOT = CONF_DIR.parent

@@ -31,7 +31,7 @@ def client(launch: Path):
 def check_store(launch: Path, cells: set[tuple[str, str, str]], train_keys: int) -> list:
     """One FINISHED training per key, one FINISHED evaluation per cell, nothing RUNNING, each metric
     step logged once, and every checkpoint on disk complete."""
-    from hgm_repro.experiment.checkpoint import load_checkpoint
+    from hgm_repro.contracts.checkpoint import load_checkpoint
 
     runs = store_runs(launch)
     assert [r.info.run_name for r in runs if r.info.status == "RUNNING"] == []
@@ -57,7 +57,7 @@ def test_sigusr2_under_submitit_requeues_and_the_requeued_job_resumes(tmp_path: 
     safe point, writes last.pt, closes its run KILLED and hands the signal to submitit, which requeues
     it (its controller restarts the task); the requeued job resumes the same training run."""
     pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
-    from hgm_repro.experiment.checkpoint import load_checkpoint
+    from hgm_repro.contracts.checkpoint import load_checkpoint
 
     args = ("-m", *TINY, "learner.total_steps=256", "hydra/launcher=submitit_local",
             "hydra.launcher.timeout_min=30", "hydra.sweep.dir=sweep")

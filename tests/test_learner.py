@@ -9,9 +9,9 @@ import torch
 from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-from hgm_repro import CONF_DIR
-from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint
-from hgm_repro.experiment.schema import JobConfig, validate
+from hgm_repro.contracts.checkpoint import CheckpointMismatchError, load_checkpoint
+from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.schema import JobConfig, validate
 from hgm_repro.learner import NonFiniteLossError, train
 from hgm_repro.learner import dqn as dqn_module
 from hgm_repro.learner.priority_trees import MinTree, SumTree
@@ -152,7 +152,8 @@ def test_priority_trees_sample_in_proportion():
 
 
 def test_cuda_graph_is_ignored_with_a_warning_on_cpu():
-    from hgm_repro.learner.builders import make_actor, make_loss, make_network, make_update
+    from hgm_repro.learner.builders import make_loss, make_update
+    from hgm_repro.models.builders import make_actor, make_network
 
     job = compose_job("learner.cuda_graph=true")
     loss = make_loss(job.learner, make_actor(make_network(job)))

@@ -9,15 +9,16 @@ from omegaconf import open_dict
 from tensordict import TensorDict
 from torchrl.objectives import HardUpdate, SoftUpdate
 
-from hgm_repro.experiment.checkpoint import EMA_CHECKPOINT, load_checkpoint
-from hgm_repro.experiment.schema import validate
-from hgm_repro.experiment.train_key import train_key
+from hgm_repro.contracts.checkpoint import EMA_CHECKPOINT, load_checkpoint
+from hgm_repro.contracts.errors import ConfigError
+from hgm_repro.contracts.schema import validate
+from hgm_repro.contracts.train_key import train_key
 from hgm_repro.learner import train
-from hgm_repro.learner.builders import make_actor, make_loss, make_network, make_optimizer, make_target_updater
+from hgm_repro.learner.builders import make_loss, make_optimizer, make_target_updater
 from hgm_repro.learner.exploration import LANE_CHANGES, EpsilonGreedy, random_action_probs
 from hgm_repro.learner.grouped import check_group
+from hgm_repro.models.builders import make_actor, make_network
 from hgm_repro.simulator import N_ACTIONS
-from hgm_repro.simulator.config import ConfigError
 
 from .test_learner import Recorder, compose_cfg, compose_job
 

@@ -10,16 +10,16 @@ from pathlib import Path
 
 import pytest
 
-from hgm_repro.experiment.tracking import (
+from hgm_repro.app.store import (
     CURVES_VIEW,
     GRID_VIEW,
     SHARED_VIEW_TAG,
     SHARED_VIEWS,
     StoreLocation,
     Tracker,
-    _sweep_time,
     resolve_location,
 )
+from hgm_repro.app.sweep import _sweep_time
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -11,10 +11,10 @@ from torch import nn
 
 from baselines.coordinate_net import CoordinateDuelingQNet
 from baselines.min_net import MinDuelingQNet
-from hgm_repro import CONF_DIR
-from hgm_repro.experiment.schema import validate
-from hgm_repro.learner.builders import make_network
-from hgm_repro.networks import (
+from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.schema import validate
+from hgm_repro.models.builders import make_network
+from hgm_repro.models.networks import (
     DuelingHead,
     TwoStreamDuelingQNet,
     conv_stack,

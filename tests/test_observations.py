@@ -7,6 +7,7 @@ import torch
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
+from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.observations import (
     FrameStack,
     ObservationBuilder,
@@ -19,7 +20,6 @@ from hgm_repro.observations import (
     hyper_grid_matrix,
 )
 from hgm_repro.simulator import HOST, HighwaySimulator
-from hgm_repro.simulator.loading import scenario_config, simulator_config
 
 H = W = 84
 D_R = 40.0

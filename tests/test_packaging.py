@@ -10,22 +10,21 @@ import yaml
 
 import hgm_repro
 from hgm_repro import __main__ as cli
-from hgm_repro import find_conf_dir
+from hgm_repro.contracts.config_files import find_conf_dir
 
 REPO_ROOT = Path(hgm_repro.__file__).resolve().parents[1]
 
 
-def test_config_lookup_prefers_the_shipped_copy_then_the_checkout(tmp_path, monkeypatch):
+def test_config_lookup_prefers_the_shipped_copy_then_the_checkout(tmp_path):
     package = tmp_path / "hgm_repro"
-    monkeypatch.setattr(hgm_repro, "PACKAGE_ROOT", package)
     with pytest.raises(FileNotFoundError, match="configs are missing"):
-        find_conf_dir()
+        find_conf_dir(package)
     (tmp_path / "conf").mkdir()
     (tmp_path / "conf" / "config.yaml").write_text("seed: 0\n")
-    assert find_conf_dir() == tmp_path / "conf"  # a checkout or an editable install
+    assert find_conf_dir(package) == tmp_path / "conf"  # a checkout or an editable install
     (package / "conf").mkdir(parents=True)
     (package / "conf" / "config.yaml").write_text("seed: 0\n")
-    assert find_conf_dir() == package / "conf"  # an installed wheel
+    assert find_conf_dir(package) == package / "conf"  # an installed wheel
 
 
 def test_the_checkout_finds_its_own_conf():

@@ -10,10 +10,10 @@ import torch
 from PIL import Image, ImageSequence
 
 from baselines.drivers import RandomDriver
+from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.envs.render import SHOULDER_M, render_top_down
 from hgm_repro.envs.video import record_episode, save_episode
 from hgm_repro.simulator import HOST, Action, HighwaySimulator
-from hgm_repro.simulator.loading import scenario_config, simulator_config
 
 
 def make_sim(n_envs: int = 2, seed: int = 0, **overrides) -> HighwaySimulator:

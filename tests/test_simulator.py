@@ -8,8 +8,8 @@ import pytest
 import torch
 from scipy import stats
 
+from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.simulator import HOST, Action, ConfigError
-from hgm_repro.simulator.loading import scenario_config, simulator_config
 
 from .sim_helpers import calm, empty_road, make_sim, place
 

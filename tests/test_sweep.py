@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from hgm_repro import CONF_DIR
+from hgm_repro.contracts.config_files import CONF_DIR
 
 REPO_ROOT = CONF_DIR.parent
 JOB_TAGS = ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty")

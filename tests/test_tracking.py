@@ -15,22 +15,15 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-from hgm_repro import CONF_DIR
-from hgm_repro.experiment.interrupts import JobInterrupted
-from hgm_repro.experiment.job import RUN_ID_FILE, run_job
-from hgm_repro.experiment.schema import JobConfig, validate
-from hgm_repro.experiment.tracking import (
-    STORE_FORMAT_TAG,
-    StoreError,
-    Tracker,
-    flatten,
-    git_info,
-    resolve_location,
-    retry,
-    tidy_number,
-)
-from hgm_repro.experiment.train_key import train_key
-from hgm_repro.simulator.config import ConfigError, ScenarioConfig
+from hgm_repro.app.job import RUN_ID_FILE, run_job
+from hgm_repro.app.provenance import git_info
+from hgm_repro.app.store import STORE_FORMAT_TAG, StoreError, Tracker, flatten, resolve_location, retry, tidy_number
+from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.errors import ConfigError
+from hgm_repro.contracts.interrupts import JobInterrupted
+from hgm_repro.contracts.schema import JobConfig, validate
+from hgm_repro.contracts.simulator_config import ScenarioConfig
+from hgm_repro.contracts.train_key import train_key
 
 
 def make_cfg(*overrides: str) -> DictConfig:
@@ -197,7 +190,7 @@ def _run_in_a_process(launch: Path, key: str) -> tuple[subprocess.Popen, str]:
     code = (
         "import sys, time\n"
         "from pathlib import Path\n"
-        "from hgm_repro.experiment.tracking import Tracker, resolve_location\n"
+        "from hgm_repro.app.store import Tracker, resolve_location\n"
         "tracker = Tracker(resolve_location({}, Path(sys.argv[1])), 'hgm_repro')\n"
         "print(tracker.start_run('train-other', {'stage': 'train', 'train_key': sys.argv[2]}), flush=True)\n"
         "time.sleep(600)\n"
@@ -285,7 +278,7 @@ def test_a_store_from_another_version_is_named(launch: Path) -> None:
 def test_a_checkpoint_from_another_version_or_half_written_is_refused(tmp_path: Path) -> None:
     import torch
 
-    from hgm_repro.experiment.checkpoint import CheckpointMismatchError, load_checkpoint, save_checkpoint
+    from hgm_repro.contracts.checkpoint import CheckpointMismatchError, load_checkpoint, save_checkpoint
 
     path = save_checkpoint({"format": 99}, tmp_path / "last.pt")
     with pytest.raises(CheckpointMismatchError, match="another version of hgm_repro"):
@@ -310,7 +303,7 @@ def test_non_learning_driver_only_evaluates(launch: Path) -> None:
     ("simulator.lanes=0", "lanes"),
 ])
 def test_bad_value_stops_before_the_store_is_touched(tmp_path: Path, override: str, says: str) -> None:
-    from hgm_repro.simulator.config import ConfigError
+    from hgm_repro.contracts.errors import ConfigError
 
     with pytest.raises(ConfigError, match=says):
         run_job(make_cfg(override), tmp_path, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
@@ -421,7 +414,7 @@ class CheckpointLearner(FakeLearner):
     def __call__(self, job: JobConfig, checkpoint_dir: Path, log) -> Path:
         import torch
 
-        from hgm_repro.experiment.checkpoint import recorded_training_config, save_checkpoint
+        from hgm_repro.contracts.checkpoint import recorded_training_config, save_checkpoint
 
         log({"train/epsilon": 0.7750020027160645}, 64)
         state = {"format": 1, "model": job.model.name, "train_key": train_key(job), "finished": True,

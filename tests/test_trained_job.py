@@ -13,7 +13,7 @@ import pytest
 import torch
 from PIL import Image
 
-from hgm_repro import CONF_DIR
+from hgm_repro.contracts.config_files import CONF_DIR
 
 REPO_ROOT = CONF_DIR.parent
 
@@ -105,11 +105,11 @@ def test_logged_model_gives_the_checkpoints_greedy_actions(job) -> None:
     import mlflow.pytorch
     from omegaconf import OmegaConf
 
+    from hgm_repro.contracts.config_files import scenario_config
+    from hgm_repro.contracts.schema import validate
     from hgm_repro.evaluation.policies import trained_network
-    from hgm_repro.experiment.schema import validate
     from hgm_repro.observations import ObservationBuilder
     from hgm_repro.simulator import HighwaySimulator
-    from hgm_repro.simulator.loading import scenario_config
 
     mlflow.set_tracking_uri(f"sqlite:///{job.launch}/mlflow.db")
     logged = mlflow.pytorch.load_model(f"runs:/{job.train.info.run_id}/model")

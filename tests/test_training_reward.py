@@ -39,7 +39,8 @@ def test_batched_time_windows_keep_their_shape():
 
 @pytest.mark.parametrize("bad", ["learner.collision_weight=0", "learner.collision_weight=-2"])
 def test_non_positive_collision_weight_is_refused(bad):
-    from hgm_repro.experiment.schema import ConfigError, validate
+    from hgm_repro.contracts.errors import ConfigError
+    from hgm_repro.contracts.schema import validate
 
     from .test_learner import compose_cfg
 
@@ -49,7 +50,7 @@ def test_non_positive_collision_weight_is_refused(bad):
 
 @pytest.mark.parametrize("grouped", [False, True], ids=["solo", "grouped"])
 def test_training_with_a_weighted_crash_runs_to_the_end(tmp_path, grouped):
-    from hgm_repro.experiment.checkpoint import load_checkpoint
+    from hgm_repro.contracts.checkpoint import load_checkpoint
     from hgm_repro.learner import train
     from hgm_repro.learner.grouped import train_group
 

@@ -16,8 +16,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from ..contracts.config_files import scenario_config, simulator_config
 from ..simulator.highway import HighwaySimulator, StepResult
-from ..simulator.loading import scenario_config, simulator_config
 from ..simulator.state import HOST
 from .gym_observations import GymObservations, Observation
 

@@ -19,10 +19,9 @@ import numpy as np
 import torch
 import yaml
 
-from .. import CONF_DIR
+from ..contracts.config_files import CONF_DIR, load_yaml
 from ..observations import ObservationBuilder, ObservationConfig
 from ..simulator.highway import HighwaySimulator
-from ..simulator.loading import load_yaml
 from ..simulator.state import HOST
 
 OBSERVATIONS = ("hgm", "camera", "coordinates", "kinematics")

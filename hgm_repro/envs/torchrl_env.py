@@ -11,7 +11,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, OneHot, Unbounded
 from torchrl.envs import EnvBase
 
-from ..metrics import EPISODE_METRICS
+from ..contracts.names import EPISODE_METRICS
 from ..observations import ObservationBuilder, ObservationConfig
 from ..simulator import N_ACTIONS, HighwaySimulator, ScenarioConfig, SimulatorConfig
 

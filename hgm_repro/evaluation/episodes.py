@@ -20,16 +20,12 @@ from tensordict import TensorDict, TensorDictBase
 from torch.nn import functional as F
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
+from ..contracts.interrupts import raise_if_pending
+from ..contracts.names import EPISODE_METRICS, EVAL_SEED_OFFSET
+from ..contracts.schema import JobConfig
 from ..envs import make_env
-from ..experiment.interrupts import raise_if_pending
-from ..experiment.schema import JobConfig
-from ..metrics import EPISODE_METRICS
 from ..simulator import N_ACTIONS, ScenarioConfig
 from .policies import attached_driver, trained_network
-
-# Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
-# and the same for every model, so that methods meet the same traffic draws.
-EVAL_SEED_OFFSET = 100_000
 
 
 @dataclass
@@ -59,7 +55,7 @@ Policy = Callable[[TensorDictBase], TensorDictBase]
 
 
 def _learned_policy(job: JobConfig, checkpoint: Path | None, device: torch.device) -> Policy:
-    from ..learner.builders import make_actor
+    from ..models.builders import make_actor
 
     return make_actor(trained_network(job, checkpoint, device)).to(device)
 

@@ -13,15 +13,13 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..contracts.names import GIF_SEED_OFFSET
+from ..contracts.schema import JobConfig
 from ..envs.render import render_watch_frame
 from ..envs.video import record_episode
-from ..experiment.schema import JobConfig
 from ..observations import ObservationBuilder
 from ..simulator import HighwaySimulator
 from .policies import attached_driver, trained_network
-
-# Film a different episode than evaluation's first one, but the same one on every run of the job.
-GIF_SEED_OFFSET = 7919
 
 
 class GreedyPolicy:

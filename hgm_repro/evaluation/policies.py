@@ -8,15 +8,15 @@ from pathlib import Path
 import hydra.utils
 import torch
 
-from ..experiment.checkpoint import load_checkpoint
-from ..experiment.schema import JobConfig
+from ..contracts.checkpoint import load_checkpoint
+from ..contracts.schema import JobConfig
 from ..simulator import HighwaySimulator
 from ..simulator.driver import Driver, attach
 
 
 def trained_network(job: JobConfig, checkpoint: Path | None, device: torch.device) -> torch.nn.Module:
     """`job.model`'s network with the weights of `checkpoint`, in eval mode on `device`."""
-    from ..learner.builders import make_network
+    from ..models.builders import make_network
 
     if checkpoint is None:
         raise ValueError(f"model '{job.model.name}' is learned: it needs its checkpoint")

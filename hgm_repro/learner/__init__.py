@@ -1,7 +1,7 @@
 """The learner: Dueling DQN with prioritized experience replay on TorchRL (Selected Algorithm, Table 4).
 
 `train(job, checkpoint_dir, log) -> Path` trains `job.model` (`job`: the typed `JobConfig` that
-`hgm_repro.experiment.schema.validate` builds) on the training traffic and returns the final
+`hgm_repro.contracts.schema.validate` builds) on the training traffic and returns the final
 checkpoint (`checkpoint_dir/final.pt`). The parts are TorchRL's: `Collector` over the batched
 env (warm-up through its `init_random_frames`), `TensorDictPrioritizedReplayBuffer` on a
 `LazyTensorStorage` (priorities |TD error|, alpha `per_alpha`, beta annealed by `LinearScheduler`),
@@ -12,7 +12,7 @@ trees are replaced by pure-torch ones (`priority_trees.py`); the sampler itself 
 Checkpoints and resume
 ----------------------
 `checkpoint_dir/last.pt` is written every `learner.checkpoint_every` env steps and when a stop
-signal (`hgm_repro.experiment.interrupts`) ends the run between two batches, `final.pt` at the end
+signal (`hgm_repro.contracts.interrupts`) ends the run between two batches, `final.pt` at the end
 (which then replaces `last.pt`: a finished training keeps its full state once); each write goes to
 a temporary file first and is renamed into place, so a run killed while writing keeps the previous
 checkpoint. `best.pt` (validation on) holds only what evaluation loads. A checkpoint holds:
@@ -21,7 +21,7 @@ checkpoint. `best.pt` (validation on) holds only what evaluation loads. A checkp
 - env steps done, gradient updates done, the epsilon-greedy module (current epsilon), the PER beta
   schedule position, the target-update counter, the fractional update credit;
 - the torch / numpy / python RNG states and the simulator's generator;
-- the training identity (`hgm_repro.experiment.train_key.training_config`: model name and network,
+- the training identity (`hgm_repro.contracts.train_key.training_config`: model name and network,
   observation, learner, simulator, training traffic, seed) and its `train_key`. A checkpoint from
   another model or config is refused with a message naming both and listing the differing keys;
 - the replay buffer, only when it is small (`learner.checkpoint_buffer_max_mb`, default 256 MB).
@@ -40,7 +40,7 @@ A NaN or infinite loss stops the run with `NonFiniteLossError`; checkpoints alre
 metrics already logged stay.
 """
 
-from ..networks import param_counts
+from ..models.networks import param_counts
 from .dqn import NonFiniteLossError, train
 
 __all__ = ["NonFiniteLossError", "param_counts", "train"]

@@ -5,19 +5,15 @@ from __future__ import annotations
 import warnings
 from collections.abc import Callable
 
-import hydra.utils
 import torch
 from tensordict import TensorDict, TensorDictBase
-from tensordict.nn import TensorDictModule, TensorDictSequential
-from torch import nn
-from torchrl.data import LazyTensorStorage, OneHot, TensorDictPrioritizedReplayBuffer
+from tensordict.nn import TensorDictSequential
+from torchrl.data import LazyTensorStorage, TensorDictPrioritizedReplayBuffer
 from torchrl.modules import QValueActor
 from torchrl.objectives import DQNLoss, HardUpdate, SoftUpdate
 from torchrl.objectives.utils import TargetNetUpdater
 
-from ..experiment.schema import JobConfig, LearnerSchema
-from ..observations import ObservationConfig
-from ..simulator import N_ACTIONS
+from ..contracts.schema import LearnerSchema
 from .exploration import EpsilonGreedy
 from .priority_trees import install_if_missing
 
@@ -25,26 +21,6 @@ install_if_missing()
 
 # Key the replay buffer reads priorities from; DQNLoss writes its (squared) TD error there.
 PRIORITY_KEY = "td_error"
-
-
-def network_kwargs(observation: ObservationConfig) -> dict:
-    """Input sizes every network constructor receives, from the observation config."""
-    frames = observation.frame_stack
-    return {"n_actions": N_ACTIONS, "in_channels": 3 * frames, "image_size": (observation.height, observation.width),
-            "coord_dim": frames * observation.coord_k * 6}
-
-
-def make_network(job: JobConfig) -> nn.Module:
-    """The model's Q-network from `job.model.network` (`_target_`), sized for `job.observation`."""
-    if not job.model.learned or job.model.network is None:
-        raise ValueError(f"model '{job.model.name}' is not a learned model: it has no network to train")
-    return hydra.utils.instantiate(job.model.network, **network_kwargs(job.observation), _convert_="all")
-
-
-def make_actor(net: nn.Module) -> QValueActor:
-    """Greedy Q-value actor: reads the network's `in_keys`, writes a one-hot `action`."""
-    module = TensorDictModule(net, in_keys=list(net.in_keys), out_keys=["action_value"])
-    return QValueActor(module, spec=OneHot(N_ACTIONS), action_space="one-hot")
 
 
 def make_exploration(learner: LearnerSchema, device: torch.device) -> EpsilonGreedy:

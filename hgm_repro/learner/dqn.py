@@ -23,9 +23,7 @@ from torchrl.collectors import Collector
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from tqdm import tqdm
 
-from ..envs import make_env
-from ..evaluation.episodes import episode_means, run_episodes
-from ..experiment.checkpoint import (
+from ..contracts.checkpoint import (
     BEST_CHECKPOINT,
     EMA_CHECKPOINT,
     load_checkpoint,
@@ -34,15 +32,16 @@ from ..experiment.checkpoint import (
     save_final,
     weights_only,
 )
-from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
-from ..experiment.schema import JobConfig
-from ..experiment.train_key import train_key
-from ..metrics import TRAINING_CURVE_METRICS
+from ..contracts.interrupts import JobInterrupted, deferred, pending, raise_if_pending
+from ..contracts.names import TRAINING_CURVE_METRICS, VAL_SEED_OFFSET
+from ..contracts.schema import JobConfig
+from ..contracts.train_key import train_key
+from ..envs import make_env
+from ..evaluation.episodes import episode_means, run_episodes
+from ..models.builders import make_actor, make_network
 from .builders import (
-    make_actor,
     make_exploration,
     make_loss,
-    make_network,
     make_optimizer,
     make_policy,
     make_replay_buffer,
@@ -58,8 +57,6 @@ logger = logging.getLogger(__name__)
 
 
 
-# Validation traffic: seeds that neither training (seed) nor testing (seed + EVAL_SEED_OFFSET) uses.
-VAL_SEED_OFFSET = 200_000
 
 
 class NonFiniteLossError(FloatingPointError):

@@ -38,9 +38,7 @@ from torch.func import functional_call, stack_module_state
 from torchrl.data.replay_buffers.scheduler import LinearScheduler
 from torchrl.objectives import HardUpdate
 
-from ..envs import make_env
-from ..evaluation.episodes import episode_means, run_episodes
-from ..experiment.checkpoint import (
+from ..contracts.checkpoint import (
     BEST_CHECKPOINT,
     load_checkpoint,
     recorded_training_config,
@@ -48,21 +46,22 @@ from ..experiment.checkpoint import (
     save_final,
     weights_only,
 )
-from ..experiment.interrupts import JobInterrupted, deferred, pending, raise_if_pending
-from ..experiment.schema import JobConfig
-from ..experiment.train_key import train_key, training_config
-from ..metrics import TRAINING_CURVE_METRICS
+from ..contracts.interrupts import JobInterrupted, deferred, pending, raise_if_pending
+from ..contracts.names import EXPLORATION_SEED_OFFSET, TRAINING_CURVE_METRICS, VAL_SEED_OFFSET
+from ..contracts.schema import JobConfig
+from ..contracts.train_key import train_key, training_config
+from ..envs import make_env
+from ..evaluation.episodes import episode_means, run_episodes
+from ..models.builders import make_actor, make_network
 from ..simulator import N_ACTIONS
-from .builders import make_actor, make_exploration, make_loss, make_network, make_optimizer, make_replay_buffer
-from .dqn import VAL_SEED_OFFSET, NonFiniteLossError, _buffer_megabytes, _rng_state, _set_rng_state
+from .builders import make_exploration, make_loss, make_optimizer, make_replay_buffer
+from .dqn import NonFiniteLossError, _buffer_megabytes, _rng_state, _set_rng_state
 from .n_step import NStepReturns
 from .training_reward import training_reward
 
 Log = Callable[[dict[str, float], int], None]
 logger = logging.getLogger(__name__)
 
-# A member's exploration stream is seeded apart from its traffic (which uses the seed itself).
-EXPLORATION_SEED_OFFSET = 500_000
 # Keys of a collected step that are metrics, not part of a transition (as in the solo loop).
 NOT_TRANSITION_KEYS = ("episode", "reward_terms", ("next", "episode"), ("next", "reward_terms"))
 

@@ -2,13 +2,13 @@
 batched functions of the simulator state, plus frame stacking.
 
 The config is imported at once; the torch parts when first used, so that validating a job's
-config (`hgm_repro.experiment.schema`) answers without loading torch.
+config (`hgm_repro.contracts.schema`) answers without loading torch.
 """
 
 from importlib import import_module
 from typing import Any
 
-from .config import CAMERAS, HGM_VARIANTS, ObservationConfig
+from ..contracts.observation_config import CAMERAS, HGM_VARIANTS, ObservationConfig
 
 _LAZY = {
     "ObservationBuilder": ".builder", "coordinates": ".coordinates", "FrameStack": ".frame_stack",

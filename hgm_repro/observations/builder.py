@@ -8,9 +8,9 @@ from __future__ import annotations
 
 import torch
 
+from ..contracts.observation_config import ObservationConfig
 from ..simulator import HighwaySimulator, TrafficState
 from .birdseye_camera import birdseye_camera
-from .config import ObservationConfig
 from .coordinates import FEATURES, coordinates
 from .frame_stack import FrameStack
 from .front_camera import front_camera

@@ -1,13 +1,20 @@
 """The paper's five-lane heterogeneous highway as a batched torch simulator.
 
 The configs are imported at once; the torch parts when first used, so that validating a job's
-config (`hgm_repro.experiment.schema`) answers without loading torch.
+config (`hgm_repro.contracts.schema`) answers without loading torch.
 """
 
 from importlib import import_module
 from typing import Any
 
-from .config import ConfigError, RewardConfig, SafetyConfig, ScenarioConfig, SimulatorConfig, VehicleType
+from ..contracts.simulator_config import (
+    ConfigError,
+    RewardConfig,
+    SafetyConfig,
+    ScenarioConfig,
+    SimulatorConfig,
+    VehicleType,
+)
 
 _LAZY = {
     "HighwaySimulator": ".highway", "StepResult": ".highway", "episode_metrics": ".highway",

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import torch
 
-from .config import HOST_TYPE, ScenarioConfig, SimulatorConfig
+from ..contracts.simulator_config import HOST_TYPE, ScenarioConfig, SimulatorConfig
 from .neighbours import Neighbours, gather_vehicles, lane_occupancy, nearest_per_lane
 from .reward import RewardTerms, speed_reward
 from .state import HOST, Action, TrafficState
@@ -42,7 +42,7 @@ class StepResult:
 
 
 def episode_metrics(state: TrafficState) -> dict[str, torch.Tensor]:
-    """The `hgm_repro.metrics.EPISODE_METRICS` of every env's episode so far, [N] each, from its accumulators
+    """The `hgm_repro.contracts.names.EPISODE_METRICS` of every env's episode so far, [N] each, from its accumulators
     (what `StepResult.episode` reports where an episode ends)."""
     decisions = state.decision.float()
     metrics = {

@@ -20,9 +20,10 @@ from typing import Any, Literal
 
 from omegaconf import DictConfig, OmegaConf
 
-from ..observations.config import ObservationConfig
-from ..simulator.config import ConfigError, ScenarioConfig, SimulatorConfig
-from ..simulator.loading import scenario_config, simulator_config
+from .config_files import scenario_config, simulator_config
+from .errors import ConfigError
+from .observation_config import ObservationConfig
+from .simulator_config import ScenarioConfig, SimulatorConfig
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""Build simulator and scenario configs from Hydra/OmegaConf nodes or YAML files."""
+"""Where the Hydra configs live, and the simulator and scenario configs built from them (or from any
+mapping): the simulator itself never reads a file."""
 
 from __future__ import annotations
 
@@ -8,8 +9,25 @@ from typing import Any
 
 import yaml
 
-from .. import CONF_DIR
-from .config import ConfigError, ScenarioConfig, SimulatorConfig
+from .errors import ConfigError
+from .simulator_config import ScenarioConfig, SimulatorConfig
+
+PACKAGE_ROOT = Path(__file__).resolve().parents[1]
+
+
+def find_conf_dir(package_root: Path | None = None) -> Path:
+    """The Hydra configs: `hgm_repro/conf` in an installed wheel (setup.py maps the repository's
+    `conf/` there), else `conf/` beside the package in a checkout or an editable install."""
+    root = PACKAGE_ROOT if package_root is None else package_root
+    candidates = (root / "conf", root.parent / "conf")
+    for candidate in candidates:
+        if (candidate / "config.yaml").is_file():
+            return candidate
+    raise FileNotFoundError(f"hgm_repro's configs are missing: none of {[str(c) for c in candidates]} holds "
+                            "config.yaml; reinstall the package (pip install .) or run from a checkout")
+
+
+CONF_DIR = find_conf_dir()
 
 
 def _plain(node: Any) -> Any:

@@ -43,6 +43,19 @@ LEARNER_KEYS_ADDED_LATER = {"update_dtype": "float32", "eps_floor": 0.0, "eps_fl
 OBSERVATION_KEYS_ADDED_LATER = {"hgm_ahead": 0.0, "hgm_host_cell": "paper"}
 # Model values that name or describe the model without changing its training.
 MODEL_KEYS_IN_KEY = ("name", "learned", "streams", "network", "driver")
+# Modules that moved after trainings were stored (new prefix -> the prefix the key was defined
+# with): a network's `_target_` is hashed under its old path, so that a move keeps every key.
+MOVED_TARGETS = {"hgm_repro.models.networks.": "hgm_repro.networks."}
+
+
+def _stable_target(node: Any) -> Any:
+    if not isinstance(node, Mapping) or not isinstance(node.get("_target_"), str):
+        return node
+    target = node["_target_"]
+    for new, old in MOVED_TARGETS.items():
+        if target.startswith(new):
+            return {**node, "_target_": old + target[len(new):]}
+    return node
 
 
 def training_config(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str, Any]:
@@ -60,7 +73,7 @@ def training_config(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str
                and LEARNER_KEYS_ADDED_LATER.get(k, object()) != v}
     return {
         "version": TRAIN_KEY_VERSION,
-        "model": {k: model[k] for k in MODEL_KEYS_IN_KEY if k in model},
+        "model": {k: _stable_target(model[k]) if k == "network" else model[k] for k in MODEL_KEYS_IN_KEY if k in model},
         "observation": {k: v for k, v in root["observation"].items()
                         if OBSERVATION_KEYS_ADDED_LATER.get(k, object()) != v},
         "learner": learner,

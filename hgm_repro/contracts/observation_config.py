@@ -11,7 +11,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
-from ..simulator.config import finite_number
+from .simulator_config import finite_number
 
 CAMERAS = ("front", "birdseye", "none")
 HGM_VARIANTS = ("paper", "enriched", "none")

@@ -7,28 +7,19 @@ and what is allowed.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
+
+from .errors import ConfigError, finite_number
 
 HOST_TYPE = "HV"
 KMH = 1.0 / 3.6
 
 
-class ConfigError(ValueError):
-    """A configuration value is outside what the simulator accepts."""
-
-
 def _require(ok: bool, message: str) -> None:
     if not ok:
         raise ConfigError(message)
-
-
-def finite_number(where: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-        raise ConfigError(f"{where}={value!r} is not allowed: expected a finite number")
-    return float(value)
 
 
 @dataclass(frozen=True)

@@ -25,3 +25,14 @@ RUN_TAGS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "gi
 # The validation return a training run logs (greedy episodes in the training traffic, on seeds
 # no test uses): what a hyperparameter search may optimise, unlike any `eval/` value.
 VALIDATION_RETURN = "val/episode_return"
+
+# Seed offsets: one job seed gives every stream of randomness its own, never overlapping, seed.
+# Test traffic is drawn from other seeds than training traffic (same model seed, other episodes),
+# and the same for every model, so that methods meet the same traffic draws.
+EVAL_SEED_OFFSET = 100_000
+# Validation traffic: seeds that neither training (seed) nor testing (seed + EVAL_SEED_OFFSET) uses.
+VAL_SEED_OFFSET = 200_000
+# A grouped member's exploration draws (its own generator, so that members do not share one stream).
+EXPLORATION_SEED_OFFSET = 500_000
+# Film a different episode than evaluation's first one, but the same one on every run of the job.
+GIF_SEED_OFFSET = 7919

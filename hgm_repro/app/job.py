@@ -24,25 +24,30 @@ from typing import Any
 from filelock import FileLock, Timeout
 from omegaconf import DictConfig, OmegaConf
 
-from ..metrics import VALIDATION_RETURN
-from ..simulator.config import ConfigError, ScenarioConfig
-from .checkpoint import BEST_CHECKPOINT, EMA_CHECKPOINT, FINAL_CHECKPOINT, CheckpointMismatchError, weights_file
-from .interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
-from .schema import JobConfig, validate
-from .tracking import (
+from ..contracts.checkpoint import (
+    BEST_CHECKPOINT,
+    EMA_CHECKPOINT,
+    FINAL_CHECKPOINT,
+    CheckpointMismatchError,
+    weights_file,
+)
+from ..contracts.errors import BAD_INPUT_EXIT, ConfigError
+from ..contracts.interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
+from ..contracts.names import VALIDATION_RETURN
+from ..contracts.schema import JobConfig, validate
+from ..contracts.simulator_config import ScenarioConfig
+from ..contracts.train_key import evaluation_key, train_key, training_config
+from .provenance import git_info, launch_description, launch_tags
+from .store import (
     CURVES_VIEW,
     PARENT_RUN_ENV,
     StoreError,
     Tracker,
     flatten,
-    git_info,
-    launch_description,
-    launch_tags,
     resolve_location,
     scenario_label,
     tidy_number,
 )
-from .train_key import evaluation_key, train_key, training_config
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +58,6 @@ CHECKPOINT_ARTIFACT = "checkpoint"
 # Linear schedules computed in float32 (epsilon 0.775002 for 0.775): their curves need 4 decimals.
 SCHEDULE_METRICS = ("train/epsilon", "train/beta")
 SCHEDULE_DECIMALS = 4
-BAD_INPUT_EXIT = 2  # a config, store or checkpoint this job cannot use (as for a bad command line)
 
 
 @dataclass
@@ -263,8 +267,8 @@ def _open_training(
 ) -> tuple[str, str, Callable[[dict[str, float], int], None]]:
     """Start (or reopen, to resume) the key's training run; returns its id, how it trains, and the
     `log` callable the learner writes `train/*` curves through."""
-    from ..learner.builders import make_network
-    from ..networks import param_counts
+    from ..models.builders import make_network
+    from ..models.networks import param_counts
 
     job_tags = {**tags, "stage": "train", "scenario": job.train_scenario.name}
     logged: dict[str, int] = {}

@@ -17,7 +17,7 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
-from .observations import decode_hgm  # x / 127.5 - 1: the inverse of the builders' encoding
+from ..observations import decode_hgm  # x / 127.5 - 1: the inverse of the builders' encoding
 
 # Table 3: [filters, kernel, stride] of the three conv layers.
 PAPER_CONV: list[list[int]] = [[32, 8, 4], [64, 4, 2], [64, 3, 1]]

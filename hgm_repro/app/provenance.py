@@ -1,0 +1,62 @@
+"""Where a run's code and person come from: the git commit, MLflow's source tags, and the words a
+launch's parent run carries (its tags and description)."""
+
+from __future__ import annotations
+
+import getpass
+import os
+import subprocess
+from functools import lru_cache
+from pathlib import Path
+
+from ..contracts.config_files import PACKAGE_ROOT
+
+SOURCE_NAME = "python -m hgm_repro"
+
+
+def git_info(repo_root: Path = PACKAGE_ROOT.parent) -> tuple[str, str]:
+    """(commit, dirty) of the code that runs; ('unknown', 'unknown') outside a checkout."""
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", "-C", str(repo_root), *args], capture_output=True, text=True, check=True, timeout=20
+        ).stdout.strip()
+
+    try:
+        commit = git("rev-parse", "HEAD")
+        dirty = "true" if git("status", "--porcelain", "--untracked-files=no") else "false"
+        return commit, dirty
+    except (OSError, subprocess.SubprocessError):
+        return "unknown", "unknown"
+
+
+@lru_cache(maxsize=1)
+def source_tags() -> dict[str, str]:
+    """MLflow's standard tags for the code and person behind a run (the UI's Source and User)."""
+    commit, _ = git_info()
+    tags = {"mlflow.source.name": SOURCE_NAME, "mlflow.source.type": "LOCAL", "mlflow.user": _user()}
+    if commit != "unknown":
+        tags["mlflow.source.git.commit"] = commit
+    return tags
+
+
+def _user() -> str:
+    try:
+        return getpass.getuser()
+    except (KeyError, OSError):  # no passwd entry (some containers)
+        return str(os.getuid()) if hasattr(os, "getuid") else "unknown"
+
+
+def launch_tags(kind: str, overrides: str) -> dict[str, str]:
+    """Tags of a launch's parent run. No `stage` tag: analysis reads only train and eval runs."""
+    commit, dirty = git_info()
+    return {"launch": kind, "sweep": str(kind == "sweep").lower(), "overrides": overrides[:5000],
+            "git_commit": commit, "git_dirty": dirty}
+
+
+def launch_description(kind: str, overrides: str, where: Path) -> str:
+    """A launch's description: the command, where it ran, and what sits under it."""
+    what, flag = ("A sweep", "-m ") if kind == "sweep" else ("A single job", "")
+    command = f"{SOURCE_NAME} {flag}{overrides}".strip()
+    return (f"{what}: `{command}`, launched in `{where}`. The trainings and evaluations it ran are the "
+            "runs nested under it.")

@@ -1,0 +1,127 @@
+"""The package's floors: every import (function-local ones included) points down or sideways, never
+up, and no two modules import each other, directly or around a loop; `studies/` has no loop either."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+
+# The floors of docs/architecture (a module may import its own floor and the ones below).
+FLOORS = {
+    "contracts": 0,
+    "simulator": 1,
+    "observations": 2,
+    "envs": 3,
+    "models": 3,
+    "evaluation": 4,
+    "learner": 4,
+    "app": 5,
+}
+TOOLS = 6  # the package face, the entry point, bench and show
+
+
+def _module_name(path: Path, root: Path) -> str:
+    parts = list(path.relative_to(root).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _imports(path: Path, module: str, package: str) -> set[str]:
+    """Every module of `package` that `path` imports, anywhere in the file."""
+    found: set[str] = set()
+    here = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = here[: len(here) - node.level + 1]
+                names = [".".join(base + ([node.module] if node.module else []))]
+            else:
+                names = [node.module or ""]
+        else:
+            continue
+        found |= {name for name in names if name == package or name.startswith(package + ".")}
+    return found
+
+
+def import_graph(root: Path, package: str) -> dict[str, set[str]]:
+    return {_module_name(p, root): _imports(p, _module_name(p, root), package)
+            for p in sorted((root / package).rglob("*.py"))}
+
+
+def floor(module: str) -> int:
+    parts = module.split(".")
+    return FLOORS.get(parts[1], TOOLS) if len(parts) > 1 else TOOLS
+
+
+def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Every strongly connected set of more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph.get(v, ()):
+            if w not in graph:
+                continue
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            group = []
+            while True:
+                w = stack.pop()
+                group.append(w)
+                if w == v:
+                    break
+            if len(group) > 1:
+                found.append(sorted(group))
+
+    for v in graph:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_graph_reader_sees_local_and_relative_imports(tmp_path):
+    (tmp_path / "pkg" / "low").mkdir(parents=True)
+    (tmp_path / "pkg" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "low" / "__init__.py").write_text("")
+    (tmp_path / "pkg" / "low" / "a.py").write_text("def f():\n    from ..high import b\n")
+    (tmp_path / "pkg" / "high.py").write_text("from .low import a\n")
+    graph = import_graph(tmp_path, "pkg")
+    assert graph["pkg.low.a"] == {"pkg.high"}
+    assert graph["pkg.high"] == {"pkg.low"}
+    assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_no_import_points_to_a_higher_floor():
+    upward = [f"{a} (floor {floor(a)}) imports {b} (floor {floor(b)})"
+              for a, targets in import_graph(REPO, "hgm_repro").items() for b in sorted(targets)
+              if floor(b) > floor(a)]
+    assert not upward, "\n".join(upward)
+
+
+@pytest.mark.parametrize("package", ["hgm_repro", "studies", "analysis"])
+def test_no_import_cycle(package):
+    graph = import_graph(REPO, package)
+    if package == "studies":  # scripts import each other by their bare names (studies/ is on sys.path)
+        names = {m.split(".")[-1] for m in graph}
+        for path in (REPO / "studies").glob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                if isinstance(node, ast.ImportFrom) and node.module in names and not node.level:
+                    graph[_module_name(path, REPO)].add(f"studies.{node.module}")
+                elif isinstance(node, ast.Import):
+                    graph[_module_name(path, REPO)] |= {f"studies.{a.name}" for a in node.names if a.name in names}
+    assert not cycles(graph)
