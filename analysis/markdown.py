@@ -1,5 +1,5 @@
 """results.md: the test table beside the paper's Table 6, the safety numbers beside it, and the
-verdict on each claim, as Markdown for the README and docs/results/ (report.pdf holds the rest:
+verdict on each claim, as Markdown for docs/results/, which the README links (report.pdf holds the rest:
 curves, configs, every metric)."""
 
 from __future__ import annotations

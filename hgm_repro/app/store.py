@@ -333,7 +333,7 @@ class Tracker:
         requirements = [f"torch=={torch.__version__.split('+')[0]}", "hgm_repro"]
         with protected(), mlflow.start_run(run_id=run_id), _quiet("mlflow.pytorch"):
             # pickle: the network class stays ours (pt2 would trace one fixed input shape). MLflow
-            # warns about pickle on every call; the README says what loading it takes.
+            # warns about pickle on every call; docs/usage.md (Tracking in MLflow) says what loading it takes.
             retry(mlflow.pytorch.log_model, network.cpu().eval(), name=name, pip_requirements=requirements,
                   serialization_format="pickle")
         # Leaving the fluent run marks it FINISHED: the run's owner sets its real status afterwards.
