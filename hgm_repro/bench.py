@@ -199,41 +199,51 @@ def _compose(*overrides: str) -> Any:
         return validate(compose("config", overrides=list(overrides)))
 
 
+def _update_batch(job: Any, device: torch.device, gen: torch.Generator) -> Any:
+    """A replay sample of random images at `job`'s observation size and batch size."""
+    from tensordict import TensorDict
+
+    from .simulator import N_ACTIONS
+
+    b, h, w, f = job.learner.batch_size, job.observation.height, job.observation.width, job.observation.frame_stack
+
+    def images() -> torch.Tensor:
+        return torch.randint(0, 256, (b, 3 * f, h, w), dtype=torch.uint8, device=device, generator=gen)
+
+    action = torch.nn.functional.one_hot(torch.randint(0, N_ACTIONS, (b,), device=device, generator=gen), N_ACTIONS)
+    flags = torch.zeros(b, 1, dtype=torch.bool, device=device)
+    return TensorDict({
+        "camera": images(), "hgm": images(), "action": action.bool(),
+        "next": {"camera": images(), "hgm": images(), "reward": torch.randn(b, 1, device=device, generator=gen),
+                 "done": flags, "terminated": flags.clone(), "truncated": flags.clone()},
+    }, batch_size=[b], device=device)
+
+
+def _member_update(job: Any, device: torch.device) -> tuple[Any, torch.nn.Module]:
+    """One member's update step, built by the learner's own builders, and its network."""
+    from .learner.builders import make_loss, make_optimizer, make_update
+    from .models.builders import make_actor, make_network
+
+    net = make_network(job).to(device)
+    loss = make_loss(job.learner, make_actor(net).to(device)).to(device)
+    capturable = job.learner.cuda_graph and device.type == "cuda"
+    optimizer = make_optimizer(job.learner, loss.parameters(), capturable=capturable)
+    return make_update(job.learner, loss, optimizer, device), net
+
+
 def bench_learner_updates(device: torch.device, seconds: float, batch_size: int = 64,
                           mode: str = "eager") -> dict[str, Any]:
     """Gradient updates per second of the paper's network (84x84, 4 frames) at Table 4's batch size,
     built by the learner's own builders; `mode` is eager, compile or cuda_graph."""
-    from tensordict import TensorDict
-
-    from .learner.builders import make_loss, make_optimizer, make_update
-    from .models.builders import make_actor, make_network
-    from .simulator import N_ACTIONS
-
     job = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
                    f"learner.compile={mode == 'compile'}", f"learner.cuda_graph={mode == 'cuda_graph'}")
-    net = make_network(job).to(device)
-    actor = make_actor(net).to(device)
-    loss = make_loss(job.learner, actor).to(device)
-    optimizer = make_optimizer(job.learner, loss.parameters())
-    update = make_update(job.learner, loss, optimizer, device)
-    h, w, f = job.observation.height, job.observation.width, job.observation.frame_stack
-    gen = torch.Generator(device=device).manual_seed(0)
-
-    def images() -> torch.Tensor:
-        return torch.randint(0, 256, (batch_size, 3 * f, h, w), dtype=torch.uint8, device=device, generator=gen)
-
-    action = torch.nn.functional.one_hot(torch.randint(0, N_ACTIONS, (batch_size,), device=device), N_ACTIONS)
-    flags = torch.zeros(batch_size, 1, dtype=torch.bool, device=device)
-    batch = TensorDict({
-        "camera": images(), "hgm": images(), "action": action.bool(),
-        "next": {"camera": images(), "hgm": images(), "reward": torch.randn(batch_size, 1, device=device),
-                 "done": flags, "terminated": flags.clone(), "truncated": flags.clone()},
-    }, batch_size=[batch_size], device=device)
+    update, net = _member_update(job, device)
+    batch = _update_batch(job, device, torch.Generator(device=device).manual_seed(0))
     calls, elapsed = _timed(lambda: update(batch.clone()), device, seconds, warmup=12)
     params = sum(p.numel() for p in net.parameters())
     return dict(what="learner update", device=str(device), n_envs=0, camera="front", hgm="paper", mode=mode,
-                batch_size=batch_size, image=f"{h}x{w}", parameters=params, env_steps_per_s=None,
-                updates_per_s=round(calls / elapsed, 1))
+                batch_size=batch_size, image=f"{job.observation.height}x{job.observation.width}", parameters=params,
+                env_steps_per_s=None, updates_per_s=round(calls / elapsed, 1))
 
 
 def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, Any]:
@@ -294,7 +304,7 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
                            threads: int, preset: str = "quick", warmup_steps: int | None = None,
                            log_every: int | None = None) -> dict[str, Any]:
     """Aggregate training speed of `members` seeds with `preset` (default quick), end to end, by one of
-    three paths: `grouped` (one process, one vmapped update over the members, `threads` torch threads),
+    three paths: `grouped` (one process, one simulator and one Collector for the members, `threads` torch threads),
     `sequential` (one process, the members one after another on `threads` threads) or `parallel`
     (one solo job per core at once, one thread each: what a joblib sweep of solo jobs does).
     `env_steps_per_s` and `updates_per_s` are summed over the members. The grouped path also gives
@@ -308,7 +318,7 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
     from pathlib import Path
 
     from .contracts.checkpoint import load_checkpoint
-    from .learner.grouped import train_group
+    from .learner import train_group
 
     if path not in GROUPED_PATHS:
         raise ValueError(f"path={path!r} is not one of {GROUPED_PATHS}")
@@ -359,77 +369,35 @@ GROUPED_UPDATE_MODES = ("eager", "bf16", "cuda_graph", "compile")
 
 def bench_grouped_update(device: torch.device, seconds: float, members: int, mode: str,
                          preset: str = "paper") -> dict[str, Any]:
-    """Updates per second of `members` stacked networks (`preset`'s network and batch size) in one
-    step as the grouped learner takes it: its vmapped TD loss, backward, per-member gradient clipping
-    and one Adam over the stacked weights. `mode`: eager, bf16 (forward passes autocast to bf16, as
-    learner.update_dtype=bfloat16), cuda_graph (the step captured by tensordict's CudaGraphModule,
-    as learner.cuda_graph does for one member) or compile (torch.compile, as learner.compile).
-    The grouped learner itself runs eager or bf16: these lines say whether the other two would pay."""
-    import copy
-
-    from tensordict import TensorDict
-    from torch.func import stack_module_state
-
-    from .learner.builders import make_optimizer
-
-    # The grouped learner's own loss and clipping (its update loop is not a function of its own).
-    from .learner.grouped import _clip_per_member, _stacked_loss
-    from .models.builders import make_network
-    from .simulator import N_ACTIONS
-
+    """Updates per second of a training group's learning step: each of `members` networks (`preset`'s
+    network and batch size) takes one update on its own sample, as the training loop runs them, one
+    member after the other. `mode`: eager, bf16 (forward passes autocast to bf16, as
+    learner.update_dtype=bfloat16), cuda_graph (each member's step captured by tensordict's
+    CudaGraphModule, as learner.cuda_graph) or compile (torch.compile, as learner.compile)."""
     if mode not in GROUPED_UPDATE_MODES:
         raise ValueError(f"mode={mode!r} is not one of {GROUPED_UPDATE_MODES}")
     if mode in ("bf16", "cuda_graph") and device.type != "cuda":
         raise ValueError(f"mode={mode!r} needs a CUDA device")
-    job = _compose(f"experiment={preset}", f"device={device}")
-    L = job.learner
-    nets = [make_network(job).to(device) for _ in range(members)]
-    params, buffers = stack_module_state(nets)
-    names = list(params)
-    target = {n: p.detach().clone() for n, p in params.items()}
-    base = copy.deepcopy(nets[0]).to("meta")
-    optimizer = make_optimizer(L, [params[n] for n in names], capturable=mode == "cuda_graph")
-    in_keys = list(nets[0].in_keys)
-    loss_fn = _stacked_loss(base, in_keys, L.gamma, L.double_dqn, L.loss_function)
-    h, w, f, b = job.observation.height, job.observation.width, job.observation.frame_stack, L.batch_size
+    job = _compose(f"experiment={preset}", f"device={device}", f"learner.compile={mode == 'compile'}",
+                   f"learner.cuda_graph={mode == 'cuda_graph'}",
+                   f"learner.update_dtype={'bfloat16' if mode == 'bf16' else 'float32'}")
     gen = torch.Generator(device=device).manual_seed(0)
+    steps = [_member_update(job, device) for _ in range(members)]
+    batches = [_update_batch(job, device, gen) for _ in range(members)]
 
-    def images() -> torch.Tensor:
-        return torch.randint(0, 256, (members, b, 3 * f, h, w), dtype=torch.uint8, device=device, generator=gen)
+    def round_of_updates() -> None:
+        for (update, _), batch in zip(steps, batches, strict=True):
+            update(batch.clone())
 
-    action = torch.randint(0, N_ACTIONS, (members, b), device=device, generator=gen)
-    batch = TensorDict({
-        **{k: images() for k in in_keys}, **{"next_" + k: images() for k in in_keys},
-        "action": torch.nn.functional.one_hot(action, N_ACTIONS).float(),
-        "reward": torch.randn(members, b, device=device, generator=gen),
-        "terminated": torch.zeros(members, b, device=device), "steps": torch.ones(members, b, device=device),
-        "weight": torch.rand(members, b, device=device, generator=gen),
-    }, batch_size=[members, b], device=device)
-
-    def update(inputs: TensorDict) -> TensorDict:
-        with torch.autocast(device.type, dtype=torch.bfloat16, enabled=mode == "bf16"):
-            loss, td_error = loss_fn({n: params[n] for n in names}, buffers, target, inputs.to_dict())
-        loss, td_error = loss.float(), td_error.float()
-        optimizer.zero_grad(set_to_none=False)
-        loss.sum().backward()
-        norms = _clip_per_member([params[n].grad for n in names], L.max_grad_norm)
-        optimizer.step()
-        return TensorDict(loss=loss.detach(), td_error=td_error.detach(), grad_norm=norms, batch_size=[members])
-
-    if mode == "compile":
-        update = torch.compile(update)
-    elif mode == "cuda_graph":
-        from tensordict.nn import CudaGraphModule
-
-        update = CudaGraphModule(update, warmup=10)
     start = time.perf_counter()
-    update(batch)  # the first call compiles or captures
+    round_of_updates()  # the first call compiles or captures
     _sync(device)
     first_s = time.perf_counter() - start
-    calls, elapsed = _timed(lambda: update(batch), device, seconds, warmup=12)
+    calls, elapsed = _timed(round_of_updates, device, seconds, warmup=12)
     return dict(what="grouped update", device=str(device), n_envs=0, camera="front", hgm="paper", mode=mode,
-                members=members, batch_size=b, image=f"{h}x{w}", preset=preset,
-                parameters=sum(p.numel() for p in nets[0].parameters()), first_call_s=round(first_s, 2),
+                members=members, batch_size=job.learner.batch_size,
+                image=f"{job.observation.height}x{job.observation.width}", preset=preset,
+                parameters=sum(p.numel() for p in steps[0][1].parameters()), first_call_s=round(first_s, 2),
                 env_steps_per_s=None, updates_per_s=round(calls / elapsed, 1),
                 member_updates_per_s=round(calls * members / elapsed, 1))
 

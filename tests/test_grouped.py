@@ -1,21 +1,16 @@
-"""Grouped training (`hgm_repro.learner.grouped`): members' traffic, update and results."""
+"""Grouped training (`hgm_repro.learner.train_group`): members' traffic, checkpoints and resume."""
 
 from __future__ import annotations
 
-import copy
 from pathlib import Path
 
 import pytest
 import torch
-from tensordict import TensorDict
-from torch.func import stack_module_state
 
 from hgm_repro.contracts.checkpoint import load_checkpoint
 from hgm_repro.contracts.config_files import scenario_config, simulator_config
-from hgm_repro.learner import train
-from hgm_repro.learner.builders import make_loss
-from hgm_repro.learner.grouped import _load_target_into, _stacked_loss, _update_inputs, check_group, train_group
-from hgm_repro.models.builders import make_actor, make_network
+from hgm_repro.learner import train, train_group
+from hgm_repro.learner.grouped import check_group
 from hgm_repro.simulator import HighwaySimulator
 
 from .test_learner import Recorder, compose_job
@@ -55,55 +50,10 @@ def test_group_of_seeds_needs_whole_blocks():
         HighwaySimulator(cfg, scenario_config("train", cfg), 3, seed=[1, 2])
 
 
-# --- the stacked update and grouped training -------------------------------------------------------
+# --- grouped training ------------------------------------------------------------------------------
 
 
 
-
-
-def _random_batch(job, size: int, seed: int) -> TensorDict:
-    g = torch.Generator().manual_seed(seed)
-    obs_shape = (3 * job.observation.frame_stack, job.observation.height, job.observation.width)
-    obs = {k: torch.randint(0, 256, (size, *obs_shape), generator=g, dtype=torch.uint8) for k in ("camera", "hgm")}
-    nxt = {k: torch.randint(0, 256, (size, *obs_shape), generator=g, dtype=torch.uint8) for k in ("camera", "hgm")}
-    action = torch.nn.functional.one_hot(torch.randint(0, 5, (size,), generator=g), 5).bool()
-    terminated = torch.rand(size, 1, generator=g) < 0.3
-    return TensorDict({**obs, "action": action, "priority_weight": torch.rand(size, generator=g) + 0.5,
-                       "next": {**nxt, "reward": torch.randn(size, 1, generator=g), "terminated": terminated,
-                                "done": terminated, "truncated": torch.zeros(size, 1, dtype=torch.bool)}},
-                      batch_size=[size])
-
-
-@pytest.mark.parametrize("double_dqn", [False, True])
-def test_stacked_loss_is_each_members_dqn_loss(double_dqn: bool):
-    """The vmapped loss of a group equals TorchRL's DQNLoss of each member on its own batch."""
-    job = compose_job(f"learner.double_dqn={str(double_dqn).lower()}")
-    torch.manual_seed(0)
-    nets = [make_network(job) for _ in range(3)]
-    losses = [make_loss(job.learner, make_actor(net)) for net in nets]
-    for loss in losses:  # a target different from the online weights
-        with torch.no_grad():
-            for t in loss.target_value_network_params.values(True, True):
-                t.add_(0.01 * torch.randn_like(t))
-    batches = [_random_batch(job, 16, seed) for seed in range(3)]
-    expected, expected_td = [], []
-    for loss, batch in zip(losses, batches, strict=True):
-        batch = batch.clone()
-        expected.append(loss(batch)["loss"].detach())
-        expected_td.append(batch["td_error"].reshape(-1))  # DQNLoss writes it into its input
-    params, buffers = stack_module_state(nets)
-    targets = []
-    for net, loss in zip(nets, losses, strict=True):
-        target = copy.deepcopy(net)
-        _load_target_into(loss, net, target)
-        targets.append(target)
-    target_params = {k: v.detach() for k, v in stack_module_state(targets)[0].items()}
-    base = copy.deepcopy(nets[0]).to("meta")
-    fn = _stacked_loss(base, list(nets[0].in_keys), job.learner.gamma, double_dqn, job.learner.loss_function)
-    loss, td_error = fn(params, buffers, target_params, _update_inputs(batches, list(nets[0].in_keys),
-                                                                       "priority_weight"))
-    torch.testing.assert_close(loss.detach(), torch.stack(expected), rtol=1e-5, atol=1e-5)
-    torch.testing.assert_close(td_error, torch.stack(expected_td), rtol=1e-5, atol=1e-5)
 
 
 def test_group_members_must_differ_only_by_seed():

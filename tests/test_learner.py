@@ -13,7 +13,7 @@ from hgm_repro.contracts.checkpoint import CheckpointMismatchError, load_checkpo
 from hgm_repro.contracts.config_files import CONF_DIR
 from hgm_repro.contracts.schema import JobConfig, validate
 from hgm_repro.learner import NonFiniteLossError, train
-from hgm_repro.learner import dqn as dqn_module
+from hgm_repro.learner import member as member_module
 from hgm_repro.learner.priority_trees import MinTree, SumTree
 
 # Tiny on top of the smoke preset, so that every test trains in a few seconds. The observation
@@ -121,7 +121,7 @@ def test_checkpoint_from_another_model_is_refused(trained, tmp_path):
 
 
 def test_nan_loss_stops_the_run_and_keeps_checkpoints(tmp_path, monkeypatch):
-    real = dqn_module.make_update
+    real = member_module.make_update
 
     def poisoned(*args, **kwargs):
         update = real(*args, **kwargs)
@@ -133,7 +133,7 @@ def test_nan_loss_stops_the_run_and_keeps_checkpoints(tmp_path, monkeypatch):
 
         return nan_update
 
-    monkeypatch.setattr(dqn_module, "make_update", poisoned)
+    monkeypatch.setattr(member_module, "make_update", poisoned)
     cfg = compose_job("learner.checkpoint_every=16")
     log = Recorder()
     with pytest.raises(NonFiniteLossError, match="env step 32"):

@@ -16,7 +16,6 @@ from hgm_repro.contracts.train_key import train_key
 from hgm_repro.learner import train
 from hgm_repro.learner.builders import make_loss, make_optimizer, make_target_updater
 from hgm_repro.learner.exploration import LANE_CHANGES, EpsilonGreedy, random_action_probs
-from hgm_repro.learner.grouped import check_group
 from hgm_repro.models.builders import make_actor, make_network
 from hgm_repro.simulator import N_ACTIONS
 
@@ -104,12 +103,6 @@ def test_new_options_at_their_defaults_keep_the_train_key():
             del cfg.learner[key]
     assert train_key(validate(cfg)) == train_key(compose_job())
     assert train_key(compose_job("learner.random_lane_change_share=0.1")) != train_key(compose_job())
-
-
-def test_grouped_training_refuses_what_it_does_not_do_yet():
-    jobs = [compose_job("learner.ema_decay=0.99", f"seed={s}") for s in (0, 1)]
-    with pytest.raises(ValueError, match="learner.ema_decay=0.99 is not supported by grouped training"):
-        check_group(jobs)
 
 
 def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):

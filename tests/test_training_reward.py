@@ -51,8 +51,7 @@ def test_non_positive_collision_weight_is_refused(bad):
 @pytest.mark.parametrize("grouped", [False, True], ids=["solo", "grouped"])
 def test_training_with_a_weighted_crash_runs_to_the_end(tmp_path, grouped):
     from hgm_repro.contracts.checkpoint import load_checkpoint
-    from hgm_repro.learner import train
-    from hgm_repro.learner.grouped import train_group
+    from hgm_repro.learner import train, train_group
 
     from .test_learner import compose_job
 

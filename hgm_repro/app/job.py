@@ -323,7 +323,8 @@ def train_grouped(jobs: list[JobConfig], tracker: Tracker, parent_run_id: str | 
     train_keys trained. A key another process holds the lock of is left to the jobs."""
     from contextlib import ExitStack
 
-    from ..learner.grouped import group_key, train_group
+    from ..learner import train_group
+    from ..learner.grouped import group_key
 
     commit, dirty = git_info()
     groups: dict[str, list[JobConfig]] = {}

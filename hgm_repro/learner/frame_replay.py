@@ -53,11 +53,13 @@ class FrameReplay:
         self.start = torch.zeros(n_envs, dtype=torch.long, device=self.device)  # the episode's first frame
 
     @classmethod
-    def for_env(cls, buffer: TensorDictPrioritizedReplayBuffer, env: Any, n_step: int) -> FrameReplay:
-        """The memory for `env` (a `HeterogeneousHighwayEnv`): its streams, envs, frame stack and episode length."""
+    def for_env(cls, buffer: TensorDictPrioritizedReplayBuffer, env: Any, n_step: int,
+                n_envs: int | None = None) -> FrameReplay:
+        """The memory for `env` (a `HeterogeneousHighwayEnv`): its streams, envs, frame stack and episode
+        length; `n_envs`: the envs of one training member when `env` holds a group's (default: all)."""
         builder = env.observations
         shapes = {k: shape for k, (shape, _) in builder.specs().items()}
-        return cls(buffer, shapes, env.batch_size[0], builder.cfg.frame_stack, n_step,
+        return cls(buffer, shapes, n_envs or env.batch_size[0], builder.cfg.frame_stack, n_step,
                    env.simulator.config.episode_decisions, env.device)
 
     def __len__(self) -> int:

@@ -1,0 +1,230 @@
+"""Dueling DQN + prioritized replay on TorchRL: the one training loop, for one member or many.
+
+`train(job, ...)` trains one model seed; `train_group(jobs, ...)` trains the seeds of one model in
+one process (`learner.grouped`, see `grouped.py` for when). Both run `_train_together`: one batched
+simulator holds every member's envs in contiguous blocks, each block drawing its traffic from its
+member's own generator (`HighwaySimulator(seed=[...])`), so a member meets the same traffic alone or
+in any group; TorchRL's `Collector` steps it with every member's epsilon-greedy policy on its own
+block; each member (`member.py`) stores its transitions, learns from its own prioritized replay
+with its own `DQNLoss`, target rule, Adam and moving average, validates, logs and checkpoints. A solo
+run is a group of one, and a group of one gives exactly the solo run.
+
+What a member of a larger group draws differently from its solo run is only the exploration and the
+replay sampling (the process's generator serves the members in turn); its traffic and its first
+weights are its solo run's. See the package docstring (`hgm_repro.learner`) for what a checkpoint
+holds and what a resume restores.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import random
+import sys
+import time
+import warnings
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tensordict import TensorDictBase
+from tensordict.nn import TensorDictModuleBase
+from torchrl.collectors import Collector
+from tqdm import tqdm
+
+from ..contracts.interrupts import JobInterrupted, deferred, pending, raise_if_pending
+from ..contracts.schema import JobConfig
+from ..envs import make_env
+from .grouped import check_group
+from .member import Log, Member, NonFiniteLossError, set_rng_state
+
+logger = logging.getLogger(__name__)
+
+
+def train(job: JobConfig, checkpoint_dir: Path, log: Log) -> Path:
+    """Train `job.model` on `job.train_scenario`; returns the final checkpoint's path.
+
+    Resumes from `checkpoint_dir/last.pt` when it exists (and belongs to this config), and
+    returns `final.pt` at once when the run already finished.
+    """
+    return train_group([job], [checkpoint_dir], [log])[0]
+
+
+def train_group(jobs: Sequence[JobConfig], checkpoint_dirs: Sequence[Path], logs: Sequence[Log]) -> list[Path]:
+    """Train every member (`jobs[k]` into `checkpoint_dirs[k]`, curves to `logs[k]`); returns each
+    member's final checkpoint, in order.
+
+    Finished members return at once, the others resume from their `last.pt`. Members that stopped at
+    different env steps train in separate groups, one after the other (a group steps in lockstep).
+    """
+    jobs = list(jobs)
+    check_group(jobs)
+    members = [Member(job, Path(d), log) for job, d, log in zip(jobs, checkpoint_dirs, logs, strict=True)]
+    finals: dict[int, Path] = {}
+    waiting: dict[tuple, list[int]] = {}
+    for k, member in enumerate(members):
+        resume = member.read_resume()
+        if resume is not None and resume["finished"]:
+            finals[k] = member.finished_path()
+            continue
+        point = (0, 0, True) if resume is None else \
+            (int(resume["env_steps"]), int(resume["updates"]), resume["replay_buffer"] is not None)
+        waiting.setdefault(point, []).append(k)
+    for ks in waiting.values():
+        finals.update(zip(ks, _train_together([members[k] for k in ks]), strict=True))
+    return [finals[k] for k in range(len(jobs))]
+
+
+class MemberPolicies(TensorDictModuleBase):
+    """Every member's epsilon-greedy policy, each on its own block of the group's envs."""
+
+    def __init__(self, policies: Sequence[TensorDictModuleBase], member_envs: int):
+        super().__init__()
+        self.policies = torch.nn.ModuleList(policies)
+        self.member_envs = member_envs
+        self.in_keys = list(policies[0].in_keys)
+        self.out_keys = list(policies[0].out_keys)
+
+    def forward(self, td: TensorDictBase) -> TensorDictBase:
+        n = self.member_envs
+        outs = [policy(td[k * n:(k + 1) * n].copy()) for k, policy in enumerate(self.policies)]
+        td.update(torch.cat(outs, 0).select(*self.out_keys))
+        return td
+
+
+def _train_together(members: list[Member]) -> list[Path]:
+    """Members at the same point of training, stepped together to the end."""
+    job0 = members[0].job
+    L = job0.learner
+    device = torch.device(job0.device)
+    count, n_envs = len(members), L.n_envs
+    resume0 = members[0].resume
+
+    if L.torch_threads > 0:
+        torch.set_num_threads(L.torch_threads)
+    # The process-wide generators (replay sampling, exploration, the warm-up's random actions) are
+    # seeded by the group's first member: the same group gives the same results twice.
+    torch.manual_seed(job0.seed)
+    np.random.seed(job0.seed)
+    random.seed(job0.seed)
+
+    # Round the total up to whole batches so that a fresh and a resumed run stop at the same step.
+    total_steps = math.ceil(L.total_steps / n_envs) * n_envs
+    warmup_steps = math.ceil(L.warmup_steps / n_envs) * n_envs
+    steps_done = int(resume0["env_steps"]) if resume0 else 0
+    updates_done = int(resume0["updates"]) if resume0 else 0
+    update_credit = float(resume0["update_credit"]) if resume0 else 0.0
+
+    seeds = [m.job.seed for m in members]
+    env = make_env(job0, job0.train_scenario, n_envs=count * n_envs, seed=seeds[0] if count == 1 else seeds)
+    for k, member in enumerate(members):
+        if count > 1:
+            torch.manual_seed(member.job.seed)  # a member starts from the weights its solo run starts from
+        member.build(env, slice(k * n_envs, (k + 1) * n_envs), n_batches=total_steps // n_envs)
+    for member in members:
+        member.restore()
+    if resume0:
+        set_rng_state(resume0["rng"])
+
+    # Updates start once the memory holds the warm-up's worth of transitions. On a fresh run that
+    # is exactly `warmup_steps` steps of random actions; on a resume without a stored memory the
+    # restored epsilon-greedy policy refills it first (those steps count as env steps).
+    learn_from = min(warmup_steps, L.buffer_size)
+    policy = members[0].policy if count == 1 else MemberPolicies([m.policy for m in members], n_envs)
+    collector = Collector(
+        env, policy, frames_per_batch=count * n_envs, total_frames=(total_steps - steps_done) * count,
+        init_random_frames=max(0, warmup_steps - steps_done) * count, device=device, storing_device=device,
+        auto_register_policy_transforms=False)  # the Q-network is feed-forward: no InitTracker needed
+    group = seeds if count > 1 else None
+
+    def progress_state() -> dict[str, Any]:
+        return {"env_steps": steps_done, "updates": updates_done, "update_credit": update_credit, "group": group}
+
+    def stop(interrupted: JobInterrupted | None = None) -> None:
+        """A stop signal ends training between batches, never inside one: every member's last.pt
+        holds everything up to this batch (a resume loses nothing), then the signal is raised."""
+        for member in members:
+            member.save_last(finished=steps_done >= total_steps, **progress_state())
+        bar.close()
+        collector.shutdown()
+        if interrupted is not None:
+            raise interrupted
+        raise_if_pending()
+
+    name = job0.model.name if count == 1 else f"{job0.model.name} seeds {seeds}"
+    bar = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {name}",
+               disable=not sys.stdout.isatty(), dynamic_ncols=True)
+    if count > 1:
+        logger.info("grouped training: %d members of '%s' (seeds %s) in one process, %d envs each",
+                    count, job0.model.name, seeds, n_envs)
+    last_log_steps, last_log_time = steps_done, time.perf_counter()
+
+    # --- the loop: one decision in every env, store it, learn, log, checkpoint ----------------------
+    for batch in collector:
+        batch: TensorDictBase = batch.reshape(count * n_envs, -1)  # [envs, time]
+        steps_before, steps_done = steps_done, steps_done + batch.numel() // count
+        for member in members:
+            member.observe(batch[member.rows])
+
+        if len(members[0].memory) >= learn_from:
+            update_credit += batch.numel() / count / L.update_every
+            updates = 0
+            while update_credit >= 1.0:  # one unit at a time, as the credit has always been spent
+                update_credit -= 1.0
+                updates += 1
+            for member in members:
+                losses = member.learn(updates)
+                if losses is not None and not torch.isfinite(losses).all():
+                    bar.close()
+                    collector.shutdown()
+                    raise NonFiniteLossError(
+                        f"training loss became {losses.tolist()} at env step {steps_done} (update "
+                        f"{updates_done + updates}) for model '{member.job.model.name}' seed {member.job.seed}; "
+                        f"stopped. The last good checkpoint is {member.last_path} (if one was written). "
+                        f"Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
+            updates_done += updates
+            collector.update_policy_weights_()
+
+        bar.update(steps_done - steps_before)
+        if bar.n % (50 * n_envs) < n_envs:
+            bar.set_postfix(eps=f"{float(members[0].exploration.eps):.3f}",
+                            speed_kmh=f"{members[0].recent_speed:.1f}", refresh=False)
+
+        if steps_done // L.log_every > steps_before // L.log_every or steps_done >= total_steps:
+            now = time.perf_counter()
+            rate = (steps_done - last_log_steps) / max(now - last_log_time, 1e-9)
+            validating = L.eval_every > 0 and (steps_done // L.eval_every > steps_before // L.eval_every
+                                               or steps_done >= total_steps)
+            for member in members:
+                metrics = member.interval_metrics(rate, updates_done)
+                if validating:
+                    try:
+                        metrics.update(member.validate(progress_state()))
+                    except JobInterrupted as interrupted:  # stopped between validation steps
+                        stop(interrupted)
+                with deferred():  # a signal during the store write waits for the stop below, after last.pt
+                    member.log(metrics, steps_done)
+                if bar.disable:  # no bar when output goes to a file: a line per log interval instead
+                    logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h, "
+                                "crashes per episode %.2f (greedy validation %.2f)",
+                                member.job.model.name if count == 1 else f"{member.job.model.name} seed "
+                                f"{member.job.seed}", steps_done, total_steps, rate, metrics["train/epsilon"],
+                                metrics.get("train/avg_speed_kmh", float("nan")),
+                                metrics.get("train/collisions", float("nan")),
+                                metrics.get("val/collisions", float("nan")))
+            last_log_steps, last_log_time = steps_done, now
+
+        if steps_done // L.checkpoint_every > steps_before // L.checkpoint_every and steps_done < total_steps:
+            for member in members:
+                member.save_last(finished=False, **progress_state())
+
+        if pending() and steps_done < total_steps:
+            stop()
+
+    bar.close()
+    collector.shutdown()
+    if steps_done < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
+        warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
+    return [member.save_final(**progress_state()) for member in members]
