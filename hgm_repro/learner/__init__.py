@@ -1,13 +1,13 @@
 """The learner: Dueling DQN with prioritized experience replay on TorchRL (Selected Algorithm, Table 4).
 
 `train(job, checkpoint_dir, log) -> Path` trains `job.model` (`job`: the typed `JobConfig` that
-`hgm_repro.contracts.schema.validate` builds) on the training traffic and returns the final
-checkpoint (`checkpoint_dir/final.pt`); `train_group(jobs, checkpoint_dirs, logs)` trains the seeds of one
-model in one process, in the same loop (`loop.py`: a solo run is a group of one). The parts are
-TorchRL's: `Collector` over the batched env (warm-up through its `init_random_frames`),
-`TensorDictPrioritizedReplayBuffer` on a `LazyTensorStorage` (priorities |TD error|, alpha `per_alpha`, beta annealed by `LinearScheduler`),
-`QValueActor` + `EGreedyModule`, `DQNLoss` with a delayed target and `HardUpdate` (or `SoftUpdate`). When TorchRL's
-compiled extension does not load (its 0.14.1 wheel against torch 2.13 CPU), the sampler's segment
+`hgm_repro.contracts.schema.validate` builds) on the training traffic and returns the final checkpoint
+(`checkpoint_dir/final.pt`); `train_group(jobs, checkpoint_dirs, logs)` trains the seeds of one model in one
+process, in the same loop (`loop.py`: a solo run is a group of one). The parts are TorchRL's: `Collector` over
+the batched env (warm-up through its `init_random_frames`), `TensorDictPrioritizedReplayBuffer` on a
+`LazyTensorStorage` (priorities |TD error|, alpha `per_alpha`, beta annealed by `LinearScheduler`),
+`QValueActor` + `EGreedyModule`, `DQNLoss` with a delayed target and `HardUpdate` (or `SoftUpdate`). When
+TorchRL's compiled extension does not load (its 0.14.1 wheel against torch 2.13 CPU), the sampler's segment
 trees are replaced by pure-torch ones (`priority_trees.py`); the sampler itself stays TorchRL's.
 
 Checkpoints and resume
