@@ -214,6 +214,9 @@ def _train_together(members: list[Member]) -> list[Path]:
                                 metrics.get("train/avg_speed_kmh", float("nan")),
                                 metrics.get("train/collisions", float("nan")),
                                 metrics.get("val/collisions", float("nan")))
+            if count > 1:  # one line per group (scripts/gpu/protocol.sh reads its rate)
+                logger.info("grouped training '%s': %d/%d env steps per member, %.0f steps/s per member",
+                            job0.model.name, steps_done, total_steps, rate)
             last_log_steps, last_log_time = steps_done, now
 
         if steps_done // L.checkpoint_every > steps_before // L.checkpoint_every and steps_done < total_steps:
