@@ -19,6 +19,7 @@ from mlflow.entities import ViewType
 
 from hgm_repro.contracts.names import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
 from hgm_repro.contracts.names import RUN_TAGS as TAG_COLUMNS
+from hgm_repro.contracts.names import current_key
 
 
 class EmptyStoreError(RuntimeError):
@@ -80,7 +81,7 @@ def _runs_frame(client: MlflowClient, experiment_id: str) -> pd.DataFrame:
             }
             for tag in TAG_COLUMNS:
                 row[tag] = tags.get(tag)
-            row.update({f"params.{k}": v for k, v in run.data.params.items()})
+            row.update({f"params.{current_key(k)}": v for k, v in run.data.params.items()})  # old names too
             row.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
             rows.append(row)
         token = page.token

@@ -226,9 +226,9 @@ def _member_update(job: Any, device: torch.device) -> tuple[Any, torch.nn.Module
 
     net = make_network(job).to(device)
     loss = make_loss(job.learner, make_actor(net).to(device)).to(device)
-    capturable = job.learner.cuda_graph and device.type == "cuda"
+    capturable = job.runtime.cuda_graph and device.type == "cuda"
     optimizer = make_optimizer(job.learner, loss.parameters(), capturable=capturable)
-    return make_update(job.learner, loss, optimizer, device), net
+    return make_update(job.learner, job.runtime, loss, optimizer, device), net
 
 
 def bench_learner_updates(device: torch.device, seconds: float, batch_size: int = 64,
@@ -236,7 +236,7 @@ def bench_learner_updates(device: torch.device, seconds: float, batch_size: int 
     """Gradient updates per second of the paper's network (84x84, 4 frames) at Table 4's batch size,
     built by the learner's own builders; `mode` is eager, compile or cuda_graph."""
     job = _compose("experiment=paper", f"device={device}", f"learner.batch_size={batch_size}",
-                   f"learner.compile={mode == 'compile'}", f"learner.cuda_graph={mode == 'cuda_graph'}")
+                   f"runtime.compile={mode == 'compile'}", f"runtime.cuda_graph={mode == 'cuda_graph'}")
     update, net = _member_update(job, device)
     batch = _update_batch(job, device, torch.Generator(device=device).manual_seed(0))
     calls, elapsed = _timed(lambda: update(batch.clone()), device, seconds, warmup=12)
@@ -256,7 +256,7 @@ def bench_learner_training(device: torch.device, total_steps: int) -> dict[str, 
     n_envs = 16 if device.type == "cpu" else 64
     job = _compose("experiment=quick", f"device={device}", f"learner.total_steps={total_steps}",
                    f"learner.warmup_steps={total_steps // 4}", f"learner.n_envs={n_envs}",
-                   f"learner.checkpoint_every={total_steps * 10}", f"learner.log_every={total_steps * 10}")
+                   f"logging.checkpoint_every={total_steps * 10}", f"logging.log_every={total_steps * 10}")
     threads = torch.get_num_threads()  # the preset may pin its own thread count: put ours back after
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
@@ -282,10 +282,10 @@ def _member_job(device: torch.device, total_steps: int, seed: int, threads: int,
     sized = [f"learner.n_envs={16 if device.type == 'cpu' else 64}"] if preset == "quick" else []
     return _compose(f"experiment={preset}", f"device={device}", f"seed={seed}", f"learner.total_steps={total_steps}",
                     f"learner.warmup_steps={total_steps // 4 if warmup_steps is None else warmup_steps}", *sized,
-                    f"learner.torch_threads={threads}", "learner.eval_every=0",
+                    f"runtime.torch_threads={threads}", "eval.val_every=0",
                     "eval.checkpoint=final",  # no validation, so no best.pt for the preset's test to drive
-                    f"learner.checkpoint_every={total_steps * 10}",
-                    f"learner.log_every={log_every or total_steps * 10}")
+                    f"logging.checkpoint_every={total_steps * 10}",
+                    f"logging.log_every={log_every or total_steps * 10}")
 
 
 def _train_member(device: str, total_steps: int, seed: int, threads: int, directory: str) -> tuple[int, int]:
@@ -372,15 +372,15 @@ def bench_grouped_update(device: torch.device, seconds: float, members: int, mod
     """Updates per second of a training group's learning step: each of `members` networks (`preset`'s
     network and batch size) takes one update on its own sample, as the training loop runs them, one
     member after the other. `mode`: eager, bf16 (forward passes autocast to bf16, as
-    learner.update_dtype=bfloat16), cuda_graph (each member's step captured by tensordict's
-    CudaGraphModule, as learner.cuda_graph) or compile (torch.compile, as learner.compile)."""
+    runtime.update_dtype=bfloat16), cuda_graph (each member's step captured by tensordict's
+    CudaGraphModule, as runtime.cuda_graph) or compile (torch.compile, as runtime.compile)."""
     if mode not in GROUPED_UPDATE_MODES:
         raise ValueError(f"mode={mode!r} is not one of {GROUPED_UPDATE_MODES}")
     if mode in ("bf16", "cuda_graph") and device.type != "cuda":
         raise ValueError(f"mode={mode!r} needs a CUDA device")
-    job = _compose(f"experiment={preset}", f"device={device}", f"learner.compile={mode == 'compile'}",
-                   f"learner.cuda_graph={mode == 'cuda_graph'}",
-                   f"learner.update_dtype={'bfloat16' if mode == 'bf16' else 'float32'}")
+    job = _compose(f"experiment={preset}", f"device={device}", f"runtime.compile={mode == 'compile'}",
+                   f"runtime.cuda_graph={mode == 'cuda_graph'}",
+                   f"runtime.update_dtype={'bfloat16' if mode == 'bf16' else 'float32'}")
     gen = torch.Generator(device=device).manual_seed(0)
     steps = [_member_update(job, device) for _ in range(members)]
     batches = [_update_batch(job, device, gen) for _ in range(members)]

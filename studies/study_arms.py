@@ -14,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[1]
 CAMERA = ["observation.camera_pitch_deg=15", "observation.camera_fov_deg=60", "observation.camera_height=1.2",
           "observation.vehicle_height=1.5"]
 DQN_FIXES = ["learner.n_step=3", "learner.double_dqn=true", "learner.loss_function=smooth_l1"]
-R20 = [*DQN_FIXES, "learner.val_envs=32"]
+R20 = [*DQN_FIXES, "eval.val_envs=32"]
 
 # Every arm states each learner option it studies, so that its meaning does not move when the
 # preset does (the quick preset adopted DQN_FIXES from this study).
@@ -98,7 +98,7 @@ ARMS: dict[str, list[str]] = {
                            "learner.target_tau=0.005", "learner.ema_decay=0.999", "learner.total_steps=160000"],
     # A memory that holds the whole run (80k transitions, frames stored once: about 600 MB), so that
     # the high-speed crashes of early training stay in it once the greedy host has slowed down.
-    "r20_memory": R20 + ["learner.replay_frames=true", "learner.buffer_size=80000"],
+    "r20_memory": R20 + ["runtime.replay_frames=true", "learner.buffer_size=80000"],
     # What the HGM shows (the published grid keeps the paper's): the host visible at every speed
     # (at 60 km/h, where every host starts, the paper's formula writes the empty cell's 0), a window
     # reaching 80 m ahead (shedding 26 km/h takes about 57 m; D_r is 40 m), and the enriched variant

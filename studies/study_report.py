@@ -19,7 +19,8 @@ from omegaconf import OmegaConf  # noqa: E402
 from study_arms import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
 
 from analysis.stats import mean_ci  # noqa: E402
-from hgm_repro.contracts.train_key import NON_TRAINING_LEARNER_KEYS  # noqa: E402
+from hgm_repro.contracts.names import current_key  # noqa: E402
+from hgm_repro.contracts.train_key import TRAINING_GROUPS  # noqa: E402
 
 # Training curves (with exploration) and the greedy validation return (no exploration, seeds no
 # test uses): the second shows when a host has learned, the first how it explored.
@@ -58,10 +59,9 @@ def _arm_of(params: dict[str, str], signatures: dict[str, dict[str, object]]) ->
 
 
 def _not_recorded_by_training(key: str) -> bool:
-    """A training run does not log the learner values that do not change what it learns (such as
-    `learner.val_envs`): their absence says nothing about the arm."""
-    group, _, name = key.partition(".")
-    return group == "learner" and name in NON_TRAINING_LEARNER_KEYS
+    """A training run logs only the groups it depends on (not `eval.val_envs`, say): the absence of
+    another group's value says nothing about the arm."""
+    return key.partition(".")[0] not in TRAINING_GROUPS
 
 
 def signature_default(key: str, signatures: dict[str, dict[str, object]]) -> object:
@@ -80,14 +80,15 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
             if r.info.status != "FINISHED" or "seed" not in tags:
                 continue
             model = tags.get("model")
-            arm = model if model in STUDY_REFERENCES else _arm_of(r.data.params, signatures)
+            params = {current_key(k): v for k, v in r.data.params.items()}  # stores of before issue 21 too
+            arm = model if model in STUDY_REFERENCES else _arm_of(params, signatures)
             if arm is None or model not in ("proposed", *STUDY_REFERENCES):
                 continue
             seed = int(tags["seed"])
             if tags.get("stage") == "eval":
                 # A test of the best validation checkpoint (learner_study.py --also-best) is its own row;
                 # a reference host has no checkpoint, whatever the preset names.
-                checkpoint = r.data.params.get("eval.checkpoint")
+                checkpoint = params.get("eval.checkpoint")
                 if arm not in STUDY_REFERENCES and checkpoint in ("best", "ema"):
                     arm = f"{arm}@{checkpoint}"
                 results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})

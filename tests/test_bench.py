@@ -61,7 +61,7 @@ def test_grouped_training_members_are_valid_jobs_of_the_current_preset():
     from hgm_repro.bench import _member_job
 
     job = _member_job(torch.device("cpu"), total_steps=64, seed=3, threads=1)
-    assert job.learner.eval_every == 0 and job.eval.checkpoint == "final" and job.seed == 3
+    assert job.eval.val_every == 0 and job.eval.checkpoint == "final" and job.seed == 3
 
 
 def test_bench_protocol_lines_rate_and_grouped_update(capsys):

@@ -42,14 +42,14 @@ def test_budget_rounds_up_to_whole_episodes_per_env():
 
 def test_learned_model_greedy_evaluation(checkpoint):
     # smoke episodes last 10 s = 20 decisions: 120 decisions over 4 envs = 2 episodes per env.
-    job = compose_job("learner.test_steps=120")
+    job = compose_job("eval.test_steps=120")
     result = evaluate(job, job.scenario, checkpoint)
     check_result(result, n_envs=4, per_env=2)
     assert (result.episodes["decisions"] <= 20).all()
 
 
 def test_human_driven_host_evaluation():
-    job = compose_job("model=human", "learner.test_steps=120")
+    job = compose_job("model=human", "eval.test_steps=120")
     result = evaluate(job, scenario_config("1", job.simulator), None)  # scenario 1 (CV ratio 0)
     check_result(result, n_envs=4, per_env=2)
     assert result.means["eval/collisions"] == 0.0  # the human host keeps the NPC safety layer
@@ -57,7 +57,7 @@ def test_human_driven_host_evaluation():
 
 
 def test_a_tiny_budget_still_counts_only_complete_episodes():
-    job = compose_job("model=human", "learner.test_steps=8")
+    job = compose_job("model=human", "eval.test_steps=8")
     result = evaluate(job, job.scenario, None)
     check_result(result, n_envs=4, per_env=1)
     assert (result.episodes["decisions"] == 20).all()
@@ -91,6 +91,6 @@ def test_evaluation_refuses_another_models_checkpoint(checkpoint):
 
 def test_evaluation_accepts_other_test_settings(checkpoint):
     # Tested in another scenario with other test budgets: the same weights load.
-    job = compose_job("learner.test_envs=2", "learner.test_steps=40", "learner.lr=0.5")
+    job = compose_job("eval.test_envs=2", "eval.test_steps=40", "learner.lr=0.5")
     result = evaluate(job, scenario_config("5", job.simulator), checkpoint)
     assert len(result.episodes) == 2 * episodes_per_env(40, 2, 20)

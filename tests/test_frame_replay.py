@@ -75,7 +75,7 @@ def test_rebuilt_stacks_equal_the_envs_across_resets_time_ups_and_crashes(model,
 
 def test_frame_memory_trains_exactly_as_the_flat_one(tmp_path):
     overrides = ("model=proposed", "learner.n_step=3", "learner.double_dqn=true")
-    flat_job, frame_job = compose_job(*overrides), compose_job(*overrides, "learner.replay_frames=true")
+    flat_job, frame_job = compose_job(*overrides), compose_job(*overrides, "runtime.replay_frames=true")
     flat = load_checkpoint(train(flat_job, tmp_path / "flat", Recorder()), flat_job)
     framed = load_checkpoint(train(frame_job, tmp_path / "frames", Recorder()), frame_job)
     assert flat["updates"] == framed["updates"] > 0
@@ -85,7 +85,7 @@ def test_frame_memory_trains_exactly_as_the_flat_one(tmp_path):
 
 
 def test_frame_memory_resumes_after_a_kill(tmp_path):
-    job = compose_job("model=proposed", "learner.n_step=3", "learner.replay_frames=true")
+    job = compose_job("model=proposed", "learner.n_step=3", "runtime.replay_frames=true")
     with pytest.raises(KeyboardInterrupt):
         train(job, tmp_path, Recorder(stop_at=96))
     last = load_checkpoint(tmp_path / "last.pt", job)

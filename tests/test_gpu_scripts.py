@@ -187,13 +187,13 @@ def test_all_runs_every_step_in_one_call_and_hands_the_budget_to_the_grid(tmp_pa
                     "--update-members 15", "--preset smoke", "--obs-n-envs 8192,32768"),
              _index(calls, "-m hgm_repro -m", "model=human,idm_mobil,idm_mobil_limits"),
              _index(calls, "budget.py", "--groups 3", "--test-cells 75", "--reference-cells 2"),
-             _index(calls, "-m hgm_repro -m", "model=proposed,min,coordinate", "learner.grouped=true",
+             _index(calls, "-m hgm_repro -m", "model=proposed,min,coordinate", "runtime.grouped=true",
                     "learner.total_steps=4096 learner.eps_steps=4096"),
              _index(calls, "-m analysis", "--write-bundle")]
     assert order == sorted(order)
     sweeps = [c for c in calls if "-m hgm_repro -m" in c]
     assert len(sweeps) == 2
-    assert all("scenario=1,2,3,4,5" in c and "seed=0,1,2,3,4" in c and "learner.test_envs=1024" in c
+    assert all("scenario=1,2,3,4,5" in c and "seed=0,1,2,3,4" in c and "eval.test_envs=1024" in c
                and "hydra.launcher.n_jobs=8" in c and c.endswith("simulator.episode_seconds=5") for c in sweeps)
     out = tmp_path / "out"
     files = sorted(p.name for p in out.iterdir())
@@ -210,7 +210,7 @@ def test_the_cpu_rehearsal_runs_the_same_steps_on_a_smaller_grid(tmp_path):
     assert not any("-m pytest" in c for c in calls)  # the CUDA-vs-CPU test needs CUDA
     assert _index(calls, "budget.py", "--device cpu", "--test-cells 12")
     sweeps = [c for c in calls if "-m hgm_repro -m" in c]
-    assert len(sweeps) == 2 and all("seed=0,1 " in c and "scenario=1,2 " in c and "learner.test_envs=4" in c
+    assert len(sweeps) == 2 and all("seed=0,1 " in c and "scenario=1,2 " in c and "eval.test_envs=4" in c
                                     for c in sweeps)
 
 

@@ -104,7 +104,7 @@ def test_grouped_training_resumes_every_member(tmp_path: Path):
 def test_grouped_setting_changes_neither_train_key_nor_evaluation_key():
     from hgm_repro.contracts.train_key import evaluation_key, train_key
 
-    solo, grouped = compose_job("learner.grouped=false"), compose_job("learner.grouped=true")
+    solo, grouped = compose_job("runtime.grouped=false"), compose_job("runtime.grouped=true")
     assert train_key(solo) == train_key(grouped) and evaluation_key(solo) == evaluation_key(grouped)
 
 
@@ -117,26 +117,20 @@ def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
 
     assert use_grouped("auto", "cuda:0") and not use_grouped("auto", "cpu")
     assert use_grouped(True, "cpu") and not use_grouped(False, "cuda")
-    with pytest.raises(ConfigError, match=r"learner.grouped='maybe' is not allowed: expected one of 'auto'"):
-        validate(compose_cfg("learner.grouped=maybe"))
+    with pytest.raises(ConfigError, match=r"runtime.grouped='maybe' is not allowed: expected one of 'auto'"):
+        validate(compose_cfg("runtime.grouped=maybe"))
 
 
-def test_bf16_update_is_cuda_only_and_float32_keeps_the_keys():
+def test_bf16_update_is_cuda_only_and_a_runtime_choice():
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
     from hgm_repro.contracts.train_key import evaluation_key, train_key
 
     from .test_learner import compose_cfg
 
-    with pytest.raises(ConfigError, match=r"learner.update_dtype=bfloat16 is not allowed with device='cpu'"):
-        validate(compose_cfg("learner.update_dtype=bfloat16"))
-    # float32 is how every stored training ran: left out of both keys, so they stay what they were
-    from omegaconf import open_dict
-
-    cfg = compose_cfg()
-    with open_dict(cfg):
-        del cfg.learner["update_dtype"]
-    before, now = validate(cfg), compose_job()
-    assert train_key(before) == train_key(now) and evaluation_key(before) == evaluation_key(now)
-    bf16 = compose_cfg("learner.update_dtype=bfloat16", "device=cuda")
-    assert train_key(bf16) != train_key(now)  # a bf16 training is another training
+    with pytest.raises(ConfigError, match=r"runtime.update_dtype=bfloat16 is not allowed with device='cpu'"):
+        validate(compose_cfg("runtime.update_dtype=bfloat16"))
+    # how the update runs, like the device: neither identity changes with it
+    bf16 = compose_cfg("runtime.update_dtype=bfloat16", "device=cuda")
+    assert train_key(bf16) == train_key(compose_cfg())
+    assert evaluation_key(bf16) == evaluation_key(compose_cfg("device=cuda"))

@@ -14,7 +14,7 @@ import pytest
 from .test_interruptions import TINY, check_store
 from .test_sweep import by_stage, command, environment, hgm, store_runs
 
-GRID = ("-m", *TINY, "model=proposed,min", "seed=0,1,2", "scenario=1,5", "learner.grouped=true",
+GRID = ("-m", *TINY, "model=proposed,min", "seed=0,1,2", "scenario=1,5", "runtime.grouped=true",
         "hydra.sweep.dir=sweep")
 CELLS = {(model, scenario, seed) for model in ("proposed", "min") for scenario in ("1", "5")
          for seed in ("0", "1", "2")}

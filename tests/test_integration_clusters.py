@@ -35,12 +35,12 @@ SEEDS = ("0",)
 SCENARIOS = ("1", "2")
 CELLS = {("proposed", s, seed) for s in SCENARIOS for seed in SEEDS}
 GRID = ("-m", "experiment=smoke", "model=proposed", f"scenario={','.join(SCENARIOS)}", f"seed={','.join(SEEDS)}",
-        "tracking.log_gif=false", "tracking.log_model=false", "learner.torch_threads=1")
+        "tracking.log_gif=false", "tracking.log_model=false", "runtime.torch_threads=1")
 # SLURM: a training longer than one attempt (75-170 s on a 2-core machine, by its load), so that the
 # time-limit signal reaches it, with checkpoints every few seconds so that each attempt makes progress.
 SLURM_STEPS = 20480
-SLURM_TRAINING = (f"learner.total_steps={SLURM_STEPS}", f"learner.eps_steps={SLURM_STEPS}", "learner.eval_every=0",
-                  "learner.checkpoint_every=256", "learner.log_every=256")
+SLURM_TRAINING = (f"learner.total_steps={SLURM_STEPS}", f"learner.eps_steps={SLURM_STEPS}", "eval.val_every=0",
+                  "logging.checkpoint_every=256", "logging.log_every=256")
 # A 2-minute limit with the signal 55 s before it: slurmctld checks limits every 30 s and sends the
 # signal up to one check early, so it comes 35-65 s into every attempt (one job start is 8-15 s of
 # imports): a first attempt trains at most ~57 s, less than 20,480 steps below 350 steps/s (60-135

@@ -18,8 +18,8 @@ from .test_sweep import by_stage, command, environment, hgm, store_runs
 
 # Smoke sizes cut further: a job is a few seconds of training and evaluation on a busy CPU.
 TINY = ("experiment=smoke", "tracking.log_gif=false", "learner.total_steps=128", "learner.warmup_steps=32",
-        "learner.batch_size=8", "learner.checkpoint_every=32", "learner.log_every=32", "learner.test_steps=32",
-        "learner.torch_threads=1")
+        "learner.batch_size=8", "logging.checkpoint_every=32", "logging.log_every=32", "eval.test_steps=32",
+        "runtime.torch_threads=1")
 
 
 def client(launch: Path):

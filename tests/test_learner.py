@@ -20,8 +20,8 @@ from hgm_repro.learner.priority_trees import MinTree, SumTree
 # sizes repeat smoke.yaml's: they make the test independent of how the root config orders presets.
 TINY = ["experiment=smoke", "observation.height=36", "observation.width=36", "observation.frame_stack=2",
         "learner.n_envs=4", "learner.batch_size=8", "learner.warmup_steps=32",
-        "learner.total_steps=128", "learner.eps_steps=128", "learner.checkpoint_every=64", "learner.log_every=32",
-        "learner.target_update_steps=32", "learner.test_steps=48", "learner.test_envs=4", "learner.torch_threads=1"]
+        "learner.total_steps=128", "learner.eps_steps=128", "logging.checkpoint_every=64", "logging.log_every=32",
+        "learner.target_update_steps=32", "eval.test_steps=48", "eval.test_envs=4", "runtime.torch_threads=1"]
 
 
 def compose_cfg(*overrides: str) -> DictConfig:
@@ -134,7 +134,7 @@ def test_nan_loss_stops_the_run_and_keeps_checkpoints(tmp_path, monkeypatch):
         return nan_update
 
     monkeypatch.setattr(member_module, "make_update", poisoned)
-    cfg = compose_job("learner.checkpoint_every=16")
+    cfg = compose_job("logging.checkpoint_every=16")
     log = Recorder()
     with pytest.raises(NonFiniteLossError, match="env step 32"):
         train(cfg, tmp_path, log)
@@ -155,17 +155,17 @@ def test_cuda_graph_is_ignored_with_a_warning_on_cpu():
     from hgm_repro.learner.builders import make_loss, make_update
     from hgm_repro.models.builders import make_actor, make_network
 
-    job = compose_job("learner.cuda_graph=true")
+    job = compose_job("runtime.cuda_graph=true")
     loss = make_loss(job.learner, make_actor(make_network(job)))
     optimizer = torch.optim.Adam(loss.parameters(), lr=1e-3)
     with pytest.warns(UserWarning, match="cuda_graph"):
-        update = make_update(job.learner, loss, optimizer, torch.device("cpu"))
+        update = make_update(job.learner, job.runtime, loss, optimizer, torch.device("cpu"))
     assert callable(update)
 
 
 @pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-@pytest.mark.parametrize("options", [[], ["learner.cuda_graph=true"], ["learner.compile=true"]])
+@pytest.mark.parametrize("options", [[], ["runtime.cuda_graph=true"], ["runtime.compile=true"]])
 def test_smoke_training_on_cuda(tmp_path, options):
     cfg = compose_job("device=cuda", *options)
     state = load_checkpoint(train(cfg, tmp_path, Recorder()), cfg)

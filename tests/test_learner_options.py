@@ -95,18 +95,20 @@ def test_adam_eps_and_polyak_targets_come_from_the_config():
                       HardUpdate)
 
 
-def test_new_options_at_their_defaults_keep_the_train_key():
+def test_every_learner_value_is_part_of_the_train_key_and_has_one_default():
+    """The key hashes the whole learner group: an option changes it, and a value the config does
+    not give is refused by name (its default lives in conf/learner/dqn.yaml only)."""
+    assert train_key(compose_job("learner.random_lane_change_share=0.1")) != train_key(compose_job())
+    assert train_key(compose_job("learner.adam_eps=0.00015")) != train_key(compose_job())
     cfg = compose_cfg()
     with open_dict(cfg):
-        for key in ("eps_floor", "eps_floor_steps", "random_lane_change_share", "adam_eps", "target_tau",
-                    "ema_decay"):
-            del cfg.learner[key]
-    assert train_key(validate(cfg)) == train_key(compose_job())
-    assert train_key(compose_job("learner.random_lane_change_share=0.1")) != train_key(compose_job())
+        del cfg.learner["target_tau"]
+    with pytest.raises(ConfigError, match="learner.target_tau is missing: expected a number"):
+        validate(cfg)
 
 
 def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):
-    job = compose_job("learner.ema_decay=0.9", "learner.eval_every=64", "learner.val_envs=2",
+    job = compose_job("learner.ema_decay=0.9", "eval.val_every=64", "eval.val_envs=2",
                       "learner.random_lane_change_share=0.1", "learner.eps_floor=0.01", "learner.eps_floor_steps=64",
                       "learner.eps_steps=32", "eval.checkpoint=ema")
     log = Recorder()
@@ -122,12 +124,7 @@ def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):
         validate(compose_cfg("eval.checkpoint=ema"))
 
 
-def test_hgm_options_are_checked_and_keep_the_train_key_at_the_papers_values():
-    cfg = compose_cfg("model=proposed")
-    with open_dict(cfg):
-        del cfg.observation["hgm_ahead"]
-        del cfg.observation["hgm_host_cell"]
-    assert train_key(validate(cfg)) == train_key(compose_job("model=proposed"))
+def test_hgm_options_are_checked_and_change_the_train_key():
     assert train_key(compose_job("model=proposed", "observation.hgm_host_cell=own_range")) != \
         train_key(compose_job("model=proposed"))
     with pytest.raises(ConfigError, match="hgm_host_cell='corner' is not allowed; allowed: \\['paper', 'own_range'\\]"):

@@ -45,8 +45,8 @@ def test_a_smoke_training_logs_what_the_solo_loop_logged(tmp_path: Path):
 
 def test_a_group_trains_with_every_learner_option(tmp_path: Path):
     """Polyak targets, the moving average and the frame memory, which only solo runs had, in a group."""
-    options = ("learner.target_tau=0.01", "learner.ema_decay=0.9", "learner.replay_frames=true", "learner.n_step=3",
-               "learner.eval_every=64", "learner.val_envs=2")
+    options = ("learner.target_tau=0.01", "learner.ema_decay=0.9", "runtime.replay_frames=true", "learner.n_step=3",
+               "eval.val_every=64", "eval.val_envs=2")
     jobs = [compose_job(*options, f"seed={s}") for s in (0, 1)]
     logs = [Recorder(), Recorder()]
     dirs = [tmp_path / "a", tmp_path / "b"]
@@ -66,3 +66,17 @@ def test_a_group_trains_with_every_learner_option(tmp_path: Path):
 def test_one_optimiser_and_one_loop_in_the_package(pattern: str):
     found = [f"{p.relative_to(PACKAGE)}" for p in PACKAGE.rglob("*.py") if re.search(pattern, p.read_text())]
     assert len(found) == 1, found
+
+
+def test_a_checkpoint_of_an_older_training_identity_is_refused_with_why(tmp_path: Path):
+    job = compose_job("seed=3", "learner.total_steps=64")
+    final = train(job, tmp_path, Recorder())
+    state = torch.load(final, weights_only=False)
+    state["training_config"]["version"] = 2
+    state["finished"] = False
+    torch.save(state, tmp_path / "last.pt")
+    final.unlink()
+    from hgm_repro.contracts.checkpoint import CheckpointMismatchError
+
+    with pytest.raises(CheckpointMismatchError, match="training identity version 2, this code's is 3"):
+        train(job, tmp_path, Recorder())

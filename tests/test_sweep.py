@@ -139,7 +139,7 @@ def test_smoke_grid_2_models_2_scenarios_2_seeds(tmp_path: Path) -> None:
 
 # A training long enough to be caught mid-way: smoke sizes, more steps, frequent checkpoints.
 # The job is stopped as soon as its first last.pt (step 64) appears.
-LONGER = ("experiment=smoke", "learner.total_steps=256", "learner.checkpoint_every=64", "tracking.log_gif=false")
+LONGER = ("experiment=smoke", "learner.total_steps=256", "logging.checkpoint_every=64", "tracking.log_gif=false")
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL], ids=["SIGTERM", "SIGKILL"])
@@ -172,14 +172,14 @@ def test_killed_training_resumes_into_one_finished_run(tmp_path: Path, sig: sign
 VALIDATION_IN_LEARNER = "eval_every" in (CONF_DIR / "learner" / "dqn.yaml").read_text()
 
 
-@pytest.mark.skipif(not VALIDATION_IN_LEARNER, reason="the learner has no validation (learner.eval_every) yet")
+@pytest.mark.skipif(not VALIDATION_IN_LEARNER, reason="the learner has no validation (eval.val_every) yet")
 def test_optuna_preset_tunes_on_the_validation_return(tmp_path: Path) -> None:
     import yaml
     from mlflow.tracking import MlflowClient
 
     pytest.importorskip("hydra_plugins.hydra_optuna_sweeper", reason="pip install '.[optuna]'")
     hgm(tmp_path, "-m", "hparams_search=optuna_val", "experiment=smoke", "hydra.sweeper.n_trials=2",
-        "hydra.sweeper.sampler.n_startup_trials=2", "learner.eval_every=128", "tracking.log_gif=false")
+        "hydra.sweeper.sampler.n_startup_trials=2", "eval.val_every=128", "tracking.log_gif=false")
     runs = store_runs(tmp_path)
     train, evals = by_stage(runs, "train"), by_stage(runs, "eval")
     assert len(train) == 2 and {r.data.tags["scenario"] for r in evals} == {"train"}  # no test scenario seen

@@ -86,7 +86,7 @@ def runs(tmp_path: Path, stage: str) -> list:
 def test_train_key_ignores_test_scenario_tracking_and_device() -> None:
     base = train_key(make_cfg())
     assert base == train_key(make_cfg("scenario='3'", "device=mps", "tracking.uri=http://x", "launcher=joblib"))
-    assert base == train_key(make_cfg("learner.test_steps=999", "learner.log_every=7"))
+    assert base == train_key(make_cfg("eval.test_steps=999", "logging.log_every=7"))
     assert base != train_key(make_cfg("seed=1"))
     assert base != train_key(make_cfg("model=min"))
     assert base != train_key(make_cfg("learner.lr=0.001"))
@@ -264,7 +264,7 @@ def test_a_finished_evaluation_is_not_repeated(launch: Path) -> None:
     again = run_job(make_cfg(), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
     assert again.eval_run_id == first.eval_run_id and again.means == first.means
     assert len(runs(launch, "eval")) == 1
-    other = run_job(make_cfg("learner.test_steps=32"), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    other = run_job(make_cfg("eval.test_steps=32"), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
     assert other.eval_run_id != first.eval_run_id and len(runs(launch, "eval")) == 2
 
 
@@ -334,7 +334,7 @@ class RecordingEvaluate:
         return fake_evaluate(job, scenario, checkpoint)
 
 
-VALIDATION_ON = "learner.eval_every=64"
+VALIDATION_ON = "eval.val_every=64"
 
 
 def test_job_returns_the_best_validation_return_never_the_test_return(launch: Path) -> None:
@@ -347,7 +347,7 @@ def test_job_returns_the_best_validation_return_never_the_test_return(launch: Pa
                     evaluate_fn=fake_evaluate)
     assert again.training.how == "reused" and again.validation_return == 7.5
     # Without validation there is nothing to hand a sweeper.
-    plain = run_job(make_cfg("scenario='3'", "seed=4", "learner.eval_every=0"), launch, train_fn=FakeLearner(),
+    plain = run_job(make_cfg("scenario='3'", "seed=4", "eval.val_every=0"), launch, train_fn=FakeLearner(),
                     evaluate_fn=fake_evaluate)
     assert plain.validation_return is None
 
@@ -366,8 +366,8 @@ def test_eval_checkpoint_best_evaluates_best_pt(launch: Path) -> None:
 
 
 def test_eval_checkpoint_best_without_best_pt_fails_clearly(launch: Path) -> None:
-    with pytest.raises(ConfigError, match="eval.checkpoint=best is not allowed with learner.eval_every=0"):
-        validate(make_cfg("eval.checkpoint=best", "learner.eval_every=0"))
+    with pytest.raises(ConfigError, match="eval.checkpoint=best is not allowed with eval.val_every=0"):
+        validate(make_cfg("eval.checkpoint=best", "eval.val_every=0"))
     # Validation asked for, but the training kept no best.pt (trained by older code, say).
     with pytest.raises(ConfigError, match=r"kept no best.pt .*eval.checkpoint=final"):
         run_job(make_cfg(VALIDATION_ON, "eval.checkpoint=best"), launch,

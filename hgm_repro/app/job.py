@@ -99,7 +99,7 @@ def hydra_job(cfg: DictConfig) -> float | None:
         raise SystemExit(BAD_INPUT_EXIT) from error
     # What a Hydra sweeper optimises: the validation return, never a test scenario's.
     if multirun and outcome.validation_return is None and outcome.training.how != "none":
-        log.warning("no %s in training run %s (validation off: learner.eval_every=0): a sweeper gets "
+        log.warning("no %s in training run %s (validation off: eval.val_every=0): a sweeper gets "
                     "nothing to optimise", VALIDATION_RETURN, outcome.training.run_id)
     return outcome.validation_return
 
@@ -395,9 +395,9 @@ def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
     if not best.is_file():
         raise ConfigError(
             f"eval.checkpoint=best, but the training (run {training.run_id}) kept no {BEST_CHECKPOINT} beside "
-            f"{training.checkpoint}: it trained without validation (learner.eval_every=0). Evaluate the final "
+            f"{training.checkpoint}: it trained without validation (eval.val_every=0). Evaluate the final "
             "network (eval.checkpoint=final), or train again with validation "
-            "(learner.eval_every=N force_retrain=true).")
+            "(eval.val_every=N force_retrain=true).")
     return best
 
 
@@ -459,8 +459,8 @@ def evaluate_and_log(
 def _evaluation_description(job: JobConfig, tracker: Tracker, training: Training, checkpoint: Path | None) -> str:
     scenario = job.scenario.name
     where = f"scenario {scenario}" if str(scenario).isdigit() else f"the `{scenario}` traffic"
-    text = (f"Evaluation of **{job.model.name}** (seed {job.seed}) in {where}: {job.learner.test_steps} greedy "
-            f"decisions over {job.learner.test_envs} envs, test traffic drawn from seeds no training uses.")
+    text = (f"Evaluation of **{job.model.name}** (seed {job.seed}) in {where}: {job.eval.test_steps} greedy "
+            f"decisions over {job.eval.test_envs} envs, test traffic drawn from seeds no training uses.")
     if training.run_id is None:
         return text + " A non-learning host: nothing was trained."
     link = tracker.run_link(training.run_id, f"training run {training.run_id[:8]}")

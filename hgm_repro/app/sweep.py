@@ -112,23 +112,23 @@ class SweepTracking(Callback):
         self._train_grouped(config, tracker)
 
     def _train_grouped(self, config: DictConfig, tracker: Tracker) -> None:
-        """Before the jobs start: train the sweep's trainings in groups where `learner.grouped` says
+        """Before the jobs start: train the sweep's trainings in groups where `runtime.grouped` says
         so (`hgm_repro.learner.grouped`); the jobs then find them FINISHED and only evaluate."""
         task = [str(o) for o in OmegaConf.to_container(config.hydra.overrides.task, resolve=False)]
         # Expanding the sweep costs a compose per job: only when a job may group.
-        deciders = ("learner.grouped", "device", "learner", "experiment")
+        deciders = ("runtime.grouped", "device", "learner", "experiment")
         swept = any(o.split("=", 1)[0].lstrip("+~") in deciders for o in task)
         try:
-            if not swept and not use_grouped(config.learner.grouped, str(config.device)):
-                log.info("learner.grouped=%s on %s: each job trains its own model (solo)", config.learner.grouped,
+            if not swept and not use_grouped(config.runtime.grouped, str(config.device)):
+                log.info("runtime.grouped=%s on %s: each job trains its own model (solo)", config.runtime.grouped,
                          config.device)
                 return
         except (ValueError, ConfigError):
             return  # a bad value: the jobs report it
         jobs = [job for job in _sweep_jobs(config) if job.model.learned]
-        grouped = [job for job in jobs if use_grouped(job.learner.grouped, job.device)]
+        grouped = [job for job in jobs if use_grouped(job.runtime.grouped, job.device)]
         if jobs:
-            log.info("learner.grouped=%s on %s: %s", jobs[0].learner.grouped, jobs[0].device,
+            log.info("runtime.grouped=%s on %s: %s", jobs[0].runtime.grouped, jobs[0].device,
                      "training the seeds of each model together before the jobs" if grouped
                      else "each job trains its own model (solo)")
         if not grouped:

@@ -60,6 +60,11 @@ def check_compatible(checkpoint: dict[str, Any], job: JobConfig, path: Path, str
     """
     saved = checkpoint.get("training_config", {})
     wanted = recorded_training_config(job)
+    if strict and saved.get("version") != wanted["version"]:
+        raise CheckpointMismatchError(
+            f"checkpoint {path} was trained under training identity version {saved.get('version')}, this code's is "
+            f"{wanted['version']} (hgm_repro.contracts.train_key.TRAIN_KEY_VERSION says what changed): it cannot be "
+            "resumed. Delete it, or use another checkpoint directory, to train again.")
     if not strict:
         saved = {k: v for k, v in saved.items() if k.startswith(ARCHITECTURE_KEYS)}
         wanted = {k: v for k, v in wanted.items() if k.startswith(ARCHITECTURE_KEYS)}

@@ -55,6 +55,9 @@ TRACKING_EXAMPLES = "sqlite:///path/mlflow.db, file:///path/mlruns, http(s)://ho
 
 @dataclass(frozen=True)
 class LearnerSchema:
+    """The algorithm: every value here shapes the trained weights (the training identity hashes all
+    of it). Defaults live in conf/learner/dqn.yaml, not here."""
+
     name: str
     lr: float = field(metadata=gt(0))
     gamma: float = field(metadata=unit())
@@ -72,33 +75,43 @@ class LearnerSchema:
     per_beta_start: float = field(metadata=unit())
     per_beta_end: float = field(metadata=unit())
     n_envs: int = field(metadata=ge(1))
-    test_steps: int = field(metadata=ge(1))
-    test_envs: int = field(metadata=ge(1))
-    checkpoint_every: int = field(metadata=ge(1))
-    log_every: int = field(metadata=ge(1))
     max_grad_norm: float = field(metadata=gt(0))
-    eval_every: int = field(default=0, metadata=ge(0))
-    val_envs: int = field(default=8, metadata=ge(1))
-    val_episodes: int = field(default=1, metadata=ge(1))
-    n_step: int = field(default=1, metadata=ge(1))
-    reward_scale: float = field(default=1.0, metadata=gt(0))
-    collision_weight: float = field(default=1.0, metadata=gt(0))
-    loss_function: Literal["l2", "l1", "smooth_l1"] = "l2"
-    checkpoint_buffer_max_mb: float = field(default=256.0, metadata=ge(0))
-    torch_threads: int = field(default=0, metadata=ge(0))
-    compile: bool = False
-    cuda_graph: bool = False
-    grouped: Literal["auto", True, False] = "auto"
-    update_dtype: Literal["float32", "bfloat16"] = "float32"
-    # Options from the learner study of issue 20 (hgm_repro.learner.exploration, dqn); each default
-    # trains as before the option existed.
-    eps_floor: float = field(default=0.0, metadata=unit())
-    eps_floor_steps: int = field(default=0, metadata=ge(0))
-    random_lane_change_share: float = field(default=0.4, metadata=unit())
-    adam_eps: float = field(default=1e-8, metadata=gt(0))
-    target_tau: float = field(default=0.0, metadata=unit())
-    ema_decay: float = field(default=0.0, metadata=unit())
-    replay_frames: bool = False
+    n_step: int = field(metadata=ge(1))
+    reward_scale: float = field(metadata=gt(0))
+    collision_weight: float = field(metadata=gt(0))
+    loss_function: Literal["l2", "l1", "smooth_l1"]
+    # Options from the learner study of issue 20 (hgm_repro.learner.exploration, member); each
+    # default in dqn.yaml trains as the learner did before the option existed.
+    eps_floor: float = field(metadata=unit())
+    eps_floor_steps: int = field(metadata=ge(0))
+    random_lane_change_share: float = field(metadata=unit())
+    adam_eps: float = field(metadata=gt(0))
+    target_tau: float = field(metadata=unit())
+    ema_decay: float = field(metadata=unit())
+
+
+@dataclass(frozen=True)
+class RuntimeSchema:
+    """How a job runs, never what it computes: threads, compilation, CUDA graphs, the update's
+    precision, grouping seeds in one process, the replay memory's layout and how much of it a
+    checkpoint keeps (conf/runtime/default.yaml). Outside the training and evaluation identities,
+    like `device`."""
+
+    torch_threads: int = field(metadata=ge(0))
+    compile: bool
+    cuda_graph: bool
+    update_dtype: Literal["float32", "bfloat16"]
+    grouped: Literal["auto", True, False]
+    replay_frames: bool
+    checkpoint_buffer_max_mb: float = field(metadata=ge(0))
+
+
+@dataclass(frozen=True)
+class LoggingSchema:
+    """How often a training reports and saves (conf/logging/default.yaml), in env steps."""
+
+    log_every: int = field(metadata=ge(1))
+    checkpoint_every: int = field(metadata=ge(1))
 
 
 @dataclass(frozen=True)
@@ -112,18 +125,28 @@ class ModelSchema:
 
 @dataclass(frozen=True)
 class TrackingSchema:
-    uri: str | None = None
-    experiment_name: str = "hgm_repro"
-    artifact_dir: str | None = None
-    checkpoint_dir: str | None = None
-    log_gif: bool = True
-    log_model: bool = True
-    system_metrics: bool = False
+    """Where runs and checkpoints go and what a run logs besides metrics (conf/tracking/sqlite.yaml)."""
+
+    uri: str | None
+    experiment_name: str
+    artifact_dir: str | None
+    checkpoint_dir: str | None
+    log_gif: bool
+    log_model: bool
+    system_metrics: bool
 
 
 @dataclass(frozen=True)
 class EvalSchema:
-    checkpoint: Literal["final", "best", "ema"] = "final"
+    """The test (decisions, envs, which checkpoint drives) and the validation passes during training
+    that choose best.pt (conf/eval/default.yaml)."""
+
+    checkpoint: Literal["final", "best", "ema"]
+    test_steps: int = field(metadata=ge(1))
+    test_envs: int = field(metadata=ge(1))
+    val_every: int = field(metadata=ge(0))
+    val_envs: int = field(metadata=ge(1))
+    val_episodes: int = field(metadata=ge(1))
 
 
 @dataclass(frozen=True)
@@ -150,6 +173,8 @@ class JobConfig:
     tracking: TrackingSchema
     experiment: ExperimentSchema
     eval: EvalSchema
+    runtime: RuntimeSchema
+    logging: LoggingSchema
     simulator: SimulatorConfig
     scenario: ScenarioConfig
     train_scenario: ScenarioConfig
@@ -246,9 +271,9 @@ def _check_device(device: Any, errors: list[str]) -> None:
 def _check_eval(evaluation: Any, model: Any, learner: Any, errors: list[str]) -> None:
     learned = isinstance(model, ModelSchema) and model.learned
     if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "best" and learned:
-        if isinstance(learner, LearnerSchema) and not learner.eval_every:
-            errors.append("eval.checkpoint=best is not allowed with learner.eval_every=0: without validation "
-                          "training keeps no best.pt (set learner.eval_every=N, or eval.checkpoint=final)")
+        if not evaluation.val_every:
+            errors.append("eval.checkpoint=best is not allowed with eval.val_every=0: without validation "
+                          "training keeps no best.pt (set eval.val_every=N, or eval.checkpoint=final)")
     if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "ema" and learned:
         if isinstance(learner, LearnerSchema) and not learner.ema_decay:
             errors.append("eval.checkpoint=ema is not allowed with learner.ema_decay=0: training keeps no moving "
@@ -283,7 +308,9 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
         "model": check_node(ModelSchema, root.get("model"), "model", errors),
         "tracking": check_node(TrackingSchema, root.get("tracking"), "tracking", errors),
         "experiment": check_node(ExperimentSchema, root.get("experiment"), "experiment", errors),
-        "eval": check_node(EvalSchema, root.get("eval", {}), "eval", errors),
+        "eval": check_node(EvalSchema, root.get("eval"), "eval", errors),
+        "runtime": check_node(RuntimeSchema, root.get("runtime"), "runtime", errors),
+        "logging": check_node(LoggingSchema, root.get("logging"), "logging", errors),
     }
     _check_model(parts["model"], errors)
     _check_tracking_uri(parts["tracking"], errors)
@@ -305,10 +332,11 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
                       "the second decay phase only lowers epsilon")
     if isinstance(learner, LearnerSchema) and learner.ema_decay >= 1.0:
         errors.append(f"learner.ema_decay={learner.ema_decay} is not allowed: must be in [0, 1) (0 = off)")
-    if isinstance(learner, LearnerSchema) and learner.update_dtype == "bfloat16" \
+    runtime = parts["runtime"]
+    if isinstance(runtime, RuntimeSchema) and runtime.update_dtype == "bfloat16" \
             and not str(root.get("device", "")).startswith("cuda"):
-        errors.append(f"learner.update_dtype=bfloat16 is not allowed with device={root.get('device')!r}: bf16 "
-                      "autocast of the update is for CUDA only (use learner.update_dtype=float32 here)")
+        errors.append(f"runtime.update_dtype=bfloat16 is not allowed with device={root.get('device')!r}: bf16 "
+                      "autocast of the update is for CUDA only (use runtime.update_dtype=float32 here)")
     _check_eval(parts["eval"], parts["model"], parts["learner"], errors)
     _check_tracking(parts["tracking"], errors)
 

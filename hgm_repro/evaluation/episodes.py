@@ -121,18 +121,18 @@ def episode_means(episodes: pd.DataFrame, prefix: str) -> dict[str, float]:
 
 
 def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) -> EvaluationResult:
-    """The fair test in `scenario`'s traffic (usually `job.scenario`): each of `learner.test_envs` envs drives the same
-    number of complete episodes (`episodes_per_env`, at least `learner.test_steps` decisions in
+    """The fair test in `scenario`'s traffic (usually `job.scenario`): each of `eval.test_envs` envs drives the same
+    number of complete episodes (`episodes_per_env`, at least `eval.test_steps` decisions in
     all), only complete episodes count, and every model of a seed meets the same traffic
     (`run_episodes`)."""
     device = torch.device(job.device)
-    if job.learner.torch_threads > 0:
-        torch.set_num_threads(job.learner.torch_threads)
-    n_envs = job.learner.test_envs
+    if job.runtime.torch_threads > 0:
+        torch.set_num_threads(job.runtime.torch_threads)
+    n_envs = job.eval.test_envs
     traffic = job.seed + EVAL_SEED_OFFSET
     env = make_env(job, scenario, n_envs=n_envs, seed=traffic)
     policy = _learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
-    quota = episodes_per_env(job.learner.test_steps, n_envs, env.simulator.config.episode_decisions)
+    quota = episodes_per_env(job.eval.test_steps, n_envs, env.simulator.config.episode_decisions)
     episodes = run_episodes(env, policy, quota, traffic)
     env.close()
     return EvaluationResult(episodes=episodes, means=episode_means(episodes, "eval"),

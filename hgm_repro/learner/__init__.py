@@ -12,7 +12,7 @@ trees are replaced by pure-torch ones (`priority_trees.py`); the sampler itself 
 
 Checkpoints and resume
 ----------------------
-`checkpoint_dir/last.pt` is written every `learner.checkpoint_every` env steps and when a stop
+`checkpoint_dir/last.pt` is written every `logging.checkpoint_every` env steps and when a stop
 signal (`hgm_repro.contracts.interrupts`) ends the run between two batches, `final.pt` at the end
 (which then replaces `last.pt`: a finished training keeps its full state once); each write goes to
 a temporary file first and is renamed into place, so a run killed while writing keeps the previous
@@ -25,7 +25,7 @@ checkpoint. `best.pt` (validation on) holds only what evaluation loads. A checkp
 - the training identity (`hgm_repro.contracts.train_key.training_config`: model name and network,
   observation, learner, simulator, training traffic, seed) and its `train_key`. A checkpoint from
   another model or config is refused with a message naming both and listing the differing keys;
-- the replay buffer, only when it is small (`learner.checkpoint_buffer_max_mb`, default 256 MB).
+- the replay buffer, only when it is small (`runtime.checkpoint_buffer_max_mb`, default 256 MB).
   A transition holds both observations of both streams in uint8: the smoke preset's buffer is
   stored, the quick preset's (about 600 MB) and the paper's (about 3.4 GB at 84x84, 4 frames) are not.
 

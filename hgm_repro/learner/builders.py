@@ -13,7 +13,7 @@ from torchrl.modules import QValueActor
 from torchrl.objectives import DQNLoss, HardUpdate, SoftUpdate
 from torchrl.objectives.utils import TargetNetUpdater
 
-from ..contracts.schema import LearnerSchema
+from ..contracts.schema import LearnerSchema, RuntimeSchema
 from .exploration import EpsilonGreedy
 from .priority_trees import install_if_missing
 
@@ -66,9 +66,10 @@ def make_replay_buffer(learner: LearnerSchema, device: torch.device) -> TensorDi
         batch_size=learner.batch_size, priority_key=PRIORITY_KEY)
 
 
-def make_update(learner: LearnerSchema, loss_module: DQNLoss, optimizer: torch.optim.Optimizer,
+def make_update(learner: LearnerSchema, runtime: RuntimeSchema, loss_module: DQNLoss, optimizer: torch.optim.Optimizer,
                 device: torch.device) -> Callable[[TensorDictBase], TensorDict]:
-    """One gradient step on a sampled batch -> TensorDict(loss, td_error, grad_norm).
+    """One gradient step on a sampled batch -> TensorDict(loss, td_error, grad_norm); `runtime` says
+    how it runs (bf16 autocast, torch.compile, a CUDA graph), never what it computes.
 
     The TD error is returned rather than read back from the batch because a CUDA-graph
     captured update works on its own static copy of the input.
@@ -76,7 +77,7 @@ def make_update(learner: LearnerSchema, loss_module: DQNLoss, optimizer: torch.o
     max_grad_norm = learner.max_grad_norm
     params = list(loss_module.parameters())
 
-    bf16 = learner.update_dtype == "bfloat16" and device.type == "cuda"
+    bf16 = runtime.update_dtype == "bfloat16" and device.type == "cuda"
 
     def update(batch: TensorDictBase) -> TensorDict:
         with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
@@ -88,11 +89,11 @@ def make_update(learner: LearnerSchema, loss_module: DQNLoss, optimizer: torch.o
         return TensorDict(loss=loss.detach(), td_error=batch.get(PRIORITY_KEY).detach(),
                           grad_norm=grad_norm.detach())
 
-    if learner.compile:
+    if runtime.compile:
         update = torch.compile(update)
-    if learner.cuda_graph:
+    if runtime.cuda_graph:
         if device.type != "cuda":
-            warnings.warn("learner.cuda_graph=true needs device=cuda; ignored on " + str(device), stacklevel=2)
+            warnings.warn("runtime.cuda_graph=true needs device=cuda; ignored on " + str(device), stacklevel=2)
         else:
             from tensordict.nn import CudaGraphModule
 

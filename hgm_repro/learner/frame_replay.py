@@ -1,4 +1,4 @@
-"""A replay memory that stores each observation frame once (`learner.replay_frames=true`).
+"""A replay memory that stores each observation frame once (`runtime.replay_frames=true`).
 
 A transition of the flat replay memory holds both observations, each a stack of F frames per
 stream: 4F frames for two streams at F=2, although consecutive steps of an env share all but one.

@@ -1,4 +1,4 @@
-"""When the seeds of one model train together in one process (`learner.grouped`), and which jobs may.
+"""When the seeds of one model train together in one process (`runtime.grouped`), and which jobs may.
 
 The loop itself is `loop.py`'s, the same for one member or many: grouping changes how many seeds
 share one simulator, one process and one Collector, never what a member's training is (its
@@ -16,14 +16,14 @@ from ..contracts.train_key import training_config
 
 
 def use_grouped(setting: str | bool, device: str) -> bool:
-    """`learner.grouped`: true / false force it; auto groups on CUDA only. On the 2-core CPU a group
+    """`runtime.grouped`: true / false force it; auto groups on CUDA only. On the 2-core CPU a group
     gave no gain per member (one thread: 43 member-updates/s alone, 44 in a group of 5), while on a
     GPU one small batch of envs and one small update leave most of the chip idle."""
     if setting == "auto":
         return torch.device(device).type == "cuda"
     if isinstance(setting, bool):
         return setting
-    raise ValueError(f"learner.grouped={setting!r} is not allowed: use auto, true or false")
+    raise ValueError(f"runtime.grouped={setting!r} is not allowed: use auto, true or false")
 
 
 def group_key(job: JobConfig) -> str:

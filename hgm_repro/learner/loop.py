@@ -1,7 +1,7 @@
 """Dueling DQN + prioritized replay on TorchRL: the one training loop, for one member or many.
 
 `train(job, ...)` trains one model seed; `train_group(jobs, ...)` trains the seeds of one model in
-one process (`learner.grouped`, see `grouped.py` for when). Both run `_train_together`: one batched
+one process (`runtime.grouped`, see `grouped.py` for when). Both run `_train_together`: one batched
 simulator holds every member's envs in contiguous blocks, each block drawing its traffic from its
 member's own generator (`HighwaySimulator(seed=[...])`), so a member meets the same traffic alone or
 in any group; TorchRL's `Collector` steps it with every member's epsilon-greedy policy on its own
@@ -100,10 +100,11 @@ def _train_together(members: list[Member]) -> list[Path]:
     L = job0.learner
     device = torch.device(job0.device)
     count, n_envs = len(members), L.n_envs
+    log_every, checkpoint_every, val_every = job0.logging.log_every, job0.logging.checkpoint_every, job0.eval.val_every
     resume0 = members[0].resume
 
-    if L.torch_threads > 0:
-        torch.set_num_threads(L.torch_threads)
+    if job0.runtime.torch_threads > 0:
+        torch.set_num_threads(job0.runtime.torch_threads)
     # The process-wide generators (replay sampling, exploration, the warm-up's random actions) are
     # seeded by the group's first member: the same group gives the same results twice.
     torch.manual_seed(job0.seed)
@@ -192,10 +193,10 @@ def _train_together(members: list[Member]) -> list[Path]:
             bar.set_postfix(eps=f"{float(members[0].exploration.eps):.3f}",
                             speed_kmh=f"{members[0].recent_speed:.1f}", refresh=False)
 
-        if steps_done // L.log_every > steps_before // L.log_every or steps_done >= total_steps:
+        if steps_done // log_every > steps_before // log_every or steps_done >= total_steps:
             now = time.perf_counter()
             rate = (steps_done - last_log_steps) / max(now - last_log_time, 1e-9)
-            validating = L.eval_every > 0 and (steps_done // L.eval_every > steps_before // L.eval_every
+            validating = val_every > 0 and (steps_done // val_every > steps_before // val_every
                                                or steps_done >= total_steps)
             for member in members:
                 metrics = member.interval_metrics(rate, updates_done)
@@ -219,7 +220,7 @@ def _train_together(members: list[Member]) -> list[Path]:
                             job0.model.name, steps_done, total_steps, rate)
             last_log_steps, last_log_time = steps_done, now
 
-        if steps_done // L.checkpoint_every > steps_before // L.checkpoint_every and steps_done < total_steps:
+        if steps_done // checkpoint_every > steps_before // checkpoint_every and steps_done < total_steps:
             for member in members:
                 member.save_last(finished=False, **progress_state())
 

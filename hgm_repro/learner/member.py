@@ -136,18 +136,18 @@ class Member:
         self.loss_module = make_loss(L, self.actor).to(device)
         self.target_updater = make_target_updater(L, self.loss_module)
         self.optimizer = make_optimizer(L, self.loss_module.parameters(),
-                                        capturable=L.cuda_graph and device.type == "cuda")
+                                        capturable=job.runtime.cuda_graph and device.type == "cuda")
         # The moving average of the online weights (learner.ema_decay > 0): tested from ema.pt.
         self.ema_net = copy.deepcopy(self.net).requires_grad_(False) if L.ema_decay > 0 else None
         self.buffer = make_replay_buffer(L, device)
-        # learner.replay_frames: the same prioritized memory, each frame stored once (frame_replay.py).
-        self.memory = FrameReplay.for_env(self.buffer, env, L.n_step, n_envs=L.n_envs) if L.replay_frames \
-            else self.buffer
+        # runtime.replay_frames: the same prioritized memory, each frame stored once (frame_replay.py).
+        self.memory = FrameReplay.for_env(self.buffer, env, L.n_step, n_envs=L.n_envs) \
+            if job.runtime.replay_frames else self.buffer
         self.beta_schedule = LinearScheduler(self.buffer, "beta", final_value=L.per_beta_end, num_steps=n_batches)
-        self.update = make_update(L, self.loss_module, self.optimizer, device)
+        self.update = make_update(L, job.runtime, self.loss_module, self.optimizer, device)
         self.n_step = NStepReturns(L.n_step, L.gamma)
-        self.val_env = make_env(job, job.train_scenario, n_envs=L.val_envs,
-                                seed=job.seed + VAL_SEED_OFFSET) if L.eval_every > 0 else None
+        self.val_env = make_env(job, job.train_scenario, n_envs=job.eval.val_envs,
+                                seed=job.seed + VAL_SEED_OFFSET) if job.eval.val_every > 0 else None
         self.ema_actor = make_actor(self.ema_net).to(device) if self.ema_net is not None else None
         self.train_key = train_key(job)
         self.config = recorded_training_config(job)
@@ -236,10 +236,9 @@ class Member:
     def validate(self, progress: dict[str, Any]) -> dict[str, float]:
         """A greedy pass over `val_episodes` episodes per validation env, in the training traffic
         drawn from validation seeds; keeps `best.pt` when the mean return is the best so far."""
-        L = self.job.learner
-        seed = self.job.seed + VAL_SEED_OFFSET
+        episodes_per_env, seed = self.job.eval.val_episodes, self.job.seed + VAL_SEED_OFFSET
         self.net.eval()
-        episodes = run_episodes(self.val_env, self.actor, L.val_episodes, seed)
+        episodes = run_episodes(self.val_env, self.actor, episodes_per_env, seed)
         self.net.train()
         metrics = episode_means(episodes, "val")
         if metrics["val/episode_return"] > self.best_val:
@@ -249,15 +248,14 @@ class Member:
         metrics["val/best_episode_return"] = self.best_val
         if self.ema_net is not None:  # the averaged weights on the same validation traffic
             self.ema_net.eval()
-            metrics.update(episode_means(run_episodes(self.val_env, self.ema_actor, L.val_episodes, seed), "val_ema"))
+            metrics.update(episode_means(run_episodes(self.val_env, self.ema_actor, episodes_per_env, seed), "val_ema"))
         return metrics
 
     # --- checkpoints -------------------------------------------------------------------------------
     def checkpoint_state(self, finished: bool, env_steps: int, updates: int, update_credit: float,
                          group: list[int] | None = None) -> dict[str, Any]:
-        L = self.job.learner
         megabytes = self.memory.megabytes() if isinstance(self.memory, FrameReplay) else buffer_megabytes(self.buffer)
-        small = megabytes <= L.checkpoint_buffer_max_mb
+        small = megabytes <= self.job.runtime.checkpoint_buffer_max_mb
         return {
             "format": 1, "model": self.job.model.name, "train_key": self.train_key, "training_config": self.config,
             "finished": finished, "env_steps": env_steps, "updates": updates, "update_credit": update_credit,

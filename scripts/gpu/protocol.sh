@@ -127,7 +127,7 @@ sweep() {  # a Hydra sweep in the store folder for at most $1 s; never past RESE
   local seconds=$1 models=$2; shift 2
   if [ "$seconds" -gt $(( $(left) - RESERVE_S )) ]; then seconds=$(( $(left) - RESERVE_S )); fi
   (cd "$RUNS" && bounded "$seconds" "$PY" -m hgm_repro -m "model=$models" "scenario=$SCENARIOS" \
-     "seed=$SEEDS" "experiment=$EXPERIMENT" "device=$DEVICE" "learner.test_envs=$TEST_ENVS" \
+     "seed=$SEEDS" "experiment=$EXPERIMENT" "device=$DEVICE" "eval.test_envs=$TEST_ENVS" \
      launcher=joblib "hydra.launcher.n_jobs=$JOBS" tracking.log_gif=false tracking.log_model=false \
      "$@" "${extra[@]}")
 }
@@ -196,7 +196,7 @@ EOF
         echo "no training budget (scripts/gpu/budget.py failed): the grid is not run" >&2; status=1; continue
       fi
       # Each model's seeds train as one group; no validation passes (the paper tests final.pt).
-      sweep "$(left)" "$LEARNED" learner.grouped=true learner.eval_every=0 eval.checkpoint=final "${budget[@]}" \
+      sweep "$(left)" "$LEARNED" runtime.grouped=true eval.val_every=0 eval.checkpoint=final "${budget[@]}" \
         | tee "$RUNS/grid.log" || status=1
       # What the trainings reached (a cut-off one stops short of the budget):
       grep -o "grouped training '[a-z_]*': [0-9]*/[0-9]* env steps per member" "$RUNS/grid.log" \
