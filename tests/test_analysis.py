@@ -16,13 +16,9 @@ from analysis.labels import fmt
 from analysis.load import load_store
 from analysis.report import SECTION_TITLES
 from analysis.synthetic import SyntheticSpec, write_store
+from tests.helpers import pdf_text
 
 SEEDS = (0, 1, 2)
-
-
-def _pdf_text(path: Path) -> str:
-    # Whitespace collapsed: where a table cell or a paragraph wraps is a layout detail.
-    return " ".join(" ".join(page.extract_text() or "" for page in PdfReader(str(path)).pages).split())
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +36,7 @@ def full_report(full_store: str, tmp_path_factory: pytest.TempPathFactory) -> Pa
 
 @pytest.fixture(scope="module")
 def full_text(full_report: Path) -> str:
-    return _pdf_text(full_report / "report.pdf")
+    return pdf_text(full_report / "report.pdf")
 
 
 def _store_means(uri: str, metric: str) -> pd.DataFrame:
@@ -123,7 +119,7 @@ def test_partial_store_one_seed_missing_cells_and_baselines(tmp_path: Path) -> N
     uri = write_store(tmp_path / "store", spec, with_parent=False)
     out = tmp_path / "reports"
     assert main(["--tracking-uri", uri, "--out", str(out), "--no-pictures"]) == 0
-    text = _pdf_text(out / "report.pdf")
+    text = pdf_text(out / "report.pdf")
     assert "1 seed, no CI" in text
     assert "No evaluation runs of the Human-driven host" in text
     assert "No evaluation runs of Coordinate" in text

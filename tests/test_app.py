@@ -3,9 +3,6 @@
 from __future__ import annotations
 
 import importlib.util
-import os
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -14,18 +11,14 @@ import yaml
 
 from hgm_repro.__main__ import quote_numeric_choices
 from hgm_repro.contracts.config_files import CONF_DIR
+from tests.helpers.cli import hgm
 
-REPO_ROOT = CONF_DIR.parent
-
-
-def hgm(tmp_path: Path, *args: str, timeout: float = 120) -> subprocess.CompletedProcess[str]:
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
-    return subprocess.run([sys.executable, "-m", "hgm_repro", *args], cwd=tmp_path, env=env,
-                          capture_output=True, text=True, timeout=timeout)
+# Every test here checks the exit code itself, and the command line answers in seconds.
+QUICK = {"check": False, "timeout": 120}
 
 
 def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
-    out = hgm(tmp_path, "--help")
+    out = hgm(tmp_path, "--help", **QUICK)
     assert out.returncode == 0, out.stderr
     for line in ("experiment: paper, quick, smoke", "launcher: basic, joblib", "learner: dqn",
                  "model: coordinate, human, idm_limits, idm_mobil, idm_mobil_limits, min, proposed, random",
@@ -38,7 +31,7 @@ def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
 
 
 def test_cfg_job_prints_the_composed_config(tmp_path: Path) -> None:
-    out = hgm(tmp_path, "--cfg", "job", "experiment=smoke", "scenario=3", "model=min", "seed=2")
+    out = hgm(tmp_path, "--cfg", "job", "experiment=smoke", "scenario=3", "model=min", "seed=2", **QUICK)
     assert out.returncode == 0, out.stderr
     cfg = yaml.safe_load(out.stdout)
     assert cfg["scenario"]["name"] == "3" and cfg["model"]["name"] == "min" and cfg["seed"] == 2
@@ -69,7 +62,7 @@ def test_numeric_group_choices_are_quoted_for_hydra() -> None:
     ],
 )
 def test_bad_value_stops_before_any_work(tmp_path: Path, override: str, expected: list[str]) -> None:
-    out = hgm(tmp_path, "experiment=smoke", override)
+    out = hgm(tmp_path, "experiment=smoke", override, **QUICK)
     assert out.returncode == 2, out.stderr
     for text in expected:
         assert text in out.stderr, (text, out.stderr[-2000:])
@@ -90,7 +83,7 @@ def test_bad_value_stops_before_any_work(tmp_path: Path, override: str, expected
 def test_bad_input_is_one_line_exit_2_and_leaves_nothing(tmp_path: Path, override: str, says: str) -> None:
     """The acceptance commands: one message, no traceback, exit code 2, no store, run, checkpoint or dir."""
     started = time.monotonic()
-    out = hgm(tmp_path, override)
+    out = hgm(tmp_path, override, **QUICK)
     seconds = time.monotonic() - started
     assert out.returncode == 2, out.stderr
     lines = [line for line in out.stderr.splitlines() if line.strip()]
@@ -101,7 +94,7 @@ def test_bad_input_is_one_line_exit_2_and_leaves_nothing(tmp_path: Path, overrid
 
 
 def test_bad_value_in_a_sweep_launches_nothing(tmp_path: Path) -> None:
-    out = hgm(tmp_path, "-m", "experiment=smoke", "learner.lr=-1", "seed=0,1")
+    out = hgm(tmp_path, "-m", "experiment=smoke", "learner.lr=-1", "seed=0,1", **QUICK)
     assert out.returncode == 2
     assert "learner.lr=-1 is not allowed" in out.stderr and "nothing was launched" in out.stderr
     assert "Launching" not in out.stdout + out.stderr and not (tmp_path / "mlflow.db").exists()
@@ -114,7 +107,7 @@ def test_bad_value_in_a_sweep_launches_nothing(tmp_path: Path) -> None:
 ])
 def test_bad_swept_value_is_one_line_and_leaves_no_file(tmp_path: Path, sweep: str, says: str) -> None:
     """A value bad in one job of the sweep stops it before Hydra starts: no store, no directory."""
-    out = hgm(tmp_path, "-m", "experiment=smoke", sweep, "seed=0,1")
+    out = hgm(tmp_path, "-m", "experiment=smoke", sweep, "seed=0,1", **QUICK)
     assert out.returncode == 2, out.stderr
     lines = [line for line in out.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and says in lines[0] and lines[0].endswith("nothing was launched"), out.stderr
@@ -122,7 +115,7 @@ def test_bad_swept_value_is_one_line_and_leaves_no_file(tmp_path: Path, sweep: s
 
 
 def test_launcher_presets_compose(tmp_path: Path) -> None:
-    out = hgm(tmp_path, "launcher=joblib", "--cfg", "hydra")
+    out = hgm(tmp_path, "launcher=joblib", "--cfg", "hydra", **QUICK)
     assert out.returncode == 0, out.stderr
     launcher = yaml.safe_load(out.stdout)["hydra"]["launcher"]
     assert launcher["_target_"].endswith("JoblibLauncher") and launcher["n_jobs"] == 2
@@ -143,7 +136,7 @@ def test_cluster_launcher_presets(tmp_path: Path, preset: str, plugin: str, targ
         found = False
     if not found:
         pytest.skip(f"{plugin} is not installed (pip install '.[{preset}]')")
-    out = hgm(tmp_path, f"launcher={preset}", "--cfg", "hydra")
+    out = hgm(tmp_path, f"launcher={preset}", "--cfg", "hydra", **QUICK)
     assert out.returncode == 0, out.stderr
     assert yaml.safe_load(out.stdout)["hydra"]["launcher"]["_target_"].startswith("hydra_plugins")
 
@@ -153,7 +146,7 @@ def test_optuna_preset_tunes_learner_values_on_the_training_traffic(tmp_path: Pa
     assert text.startswith("# @package _global_")
     if importlib.util.find_spec("hydra_plugins.hydra_optuna_sweeper") is None:
         pytest.skip("hydra-optuna-sweeper is not installed (pip install '.[optuna]')")
-    out = hgm(tmp_path, "hparams_search=optuna_val", "--cfg", "all")
+    out = hgm(tmp_path, "hparams_search=optuna_val", "--cfg", "all", **QUICK)
     assert out.returncode == 0, out.stderr
     composed = yaml.safe_load(out.stdout)
     sweeper = composed["hydra"]["sweeper"]

@@ -9,8 +9,7 @@ import yaml
 from baselines.drivers import HumanDriver, IdmMobilDriver, RandomDriver, attach, drive
 from hgm_repro.contracts.config_files import CONF_DIR, simulator_config
 from hgm_repro.simulator import N_ACTIONS, Action, HighwaySimulator
-
-from .sim_helpers import empty_road, make_sim, place
+from tests.helpers.sim import empty_road, make_sim, place
 
 KMH = 3.6
 
@@ -81,15 +80,6 @@ def test_mobil_leaves_a_slow_lane_for_a_free_one():
     # A fast car coming from behind in lane 1 makes the change unsafe for it: no change left.
     sim = scripted(2, 60 / KMH, [(25.0, 2, 45 / KMH), (20.0, 3, 45 / KMH), (-8.0, 1, 80 / KMH)])
     assert int(IdmMobilDriver().act(sim)[0]) != Action.LANE_LEFT
-
-
-@pytest.fixture
-def one_thread():
-    # The run is small tensors stepped many times: extra threads only add contention on a shared CPU.
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def test_idm_mobil_beats_the_human_host_in_training_traffic(one_thread):

@@ -11,8 +11,7 @@ from hgm_repro.contracts.config_files import scenario_config
 from hgm_repro.evaluation import EPISODE_METRICS, evaluate
 from hgm_repro.evaluation.episodes import episodes_per_env
 from hgm_repro.learner import train
-
-from .test_learner import Recorder, compose_job
+from tests.helpers.learner import Recorder, compose_job
 
 MEANS = {f"eval/{k}" for k in EPISODE_METRICS}
 

@@ -14,8 +14,7 @@ from hgm_repro.learner.builders import make_replay_buffer
 from hgm_repro.learner.frame_replay import FrameReplay
 from hgm_repro.learner.n_step import NStepReturns
 from hgm_repro.simulator import N_ACTIONS, Action
-
-from .test_learner import Recorder, compose_job
+from tests.helpers.learner import Recorder, compose_job
 
 NOT_TRANSITION = ("episode", "reward_terms", ("next", "episode"), ("next", "reward_terms"), "collector")
 

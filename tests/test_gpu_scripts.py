@@ -11,13 +11,14 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-PROTOCOL = ROOT / "scripts" / "gpu" / "protocol.sh"
+from tests.helpers import REPO_ROOT
+
+PROTOCOL = REPO_ROOT / "scripts" / "gpu" / "protocol.sh"
 
 
 @pytest.fixture(scope="module")
 def wheelhouse():
-    spec = importlib.util.spec_from_file_location("wheelhouse", ROOT / "scripts" / "gpu" / "wheelhouse.py")
+    spec = importlib.util.spec_from_file_location("wheelhouse", REPO_ROOT / "scripts" / "gpu" / "wheelhouse.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -74,7 +75,7 @@ def test_protocol_names_an_unknown_step_before_any_work(tmp_path):
 # --- the training budget of the one-call protocol (scripts/gpu/budget.py) ---------------------------
 @pytest.fixture(scope="module")
 def budget():
-    spec = importlib.util.spec_from_file_location("budget", ROOT / "scripts" / "gpu" / "budget.py")
+    spec = importlib.util.spec_from_file_location("budget", REPO_ROOT / "scripts" / "gpu" / "budget.py")
     module = importlib.util.module_from_spec(spec)
     sys.modules["budget"] = module  # its dataclass looks its module up there
     spec.loader.exec_module(module)
@@ -251,6 +252,6 @@ def test_cpu_rehearsal_of_all_finishes_within_its_limit_and_its_bundle_builds_a_
         archive.extractall(tmp_path / "unpacked", filter="data")
     report = subprocess.run([sys.executable, "-m", "analysis", "--bundle", str(tmp_path / "unpacked" / "bundle"),
                              "--out", str(tmp_path / "report"), "--no-pictures"], capture_output=True, text=True,
-                            cwd=ROOT, timeout=300)
+                            cwd=REPO_ROOT, timeout=300)
     assert report.returncode == 0, report.stderr[-2000:]
     assert (tmp_path / "report" / "report.pdf").is_file()

@@ -17,8 +17,7 @@ from hgm_repro.learner.builders import make_loss
 from hgm_repro.learner.grouped import _load_target_into, _stacked_loss, _update_inputs, check_group, train_group
 from hgm_repro.models.builders import make_actor, make_network
 from hgm_repro.simulator import HighwaySimulator
-
-from .test_learner import Recorder, compose_job
+from tests.helpers.learner import Recorder, compose_job
 
 
 def _trajectory(seeds: list[int], member_envs: int, steps: int, scenario: str = "train") -> list[torch.Tensor]:
@@ -162,8 +161,7 @@ def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
     from hgm_repro.learner.grouped import use_grouped
-
-    from .test_learner import compose_cfg
+    from tests.helpers.learner import compose_cfg
 
     assert use_grouped("auto", "cuda:0") and not use_grouped("auto", "cpu")
     assert use_grouped(True, "cpu") and not use_grouped(False, "cuda")
@@ -175,8 +173,7 @@ def test_bf16_update_is_cuda_only_and_float32_keeps_the_keys():
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
     from hgm_repro.contracts.train_key import evaluation_key, train_key
-
-    from .test_learner import compose_cfg
+    from tests.helpers.learner import compose_cfg
 
     with pytest.raises(ConfigError, match=r"learner.update_dtype=bfloat16 is not allowed with device='cpu'"):
         validate(compose_cfg("learner.update_dtype=bfloat16"))

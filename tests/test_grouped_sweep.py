@@ -11,8 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from .test_interruptions import TINY, check_store
-from .test_sweep import by_stage, command, environment, hgm, store_runs
+from tests.helpers.cli import TINY, by_stage, check_store, command, environment, hgm, store_runs
 
 GRID = ("-m", *TINY, "model=proposed,min", "seed=0,1,2", "scenario=1,5", "learner.grouped=true",
         "hydra.sweep.dir=sweep")

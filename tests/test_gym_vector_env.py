@@ -35,16 +35,6 @@ def make_vec(num_envs: int, **kw) -> VectorEnv:
     return gym.make_vec(ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", **kw)
 
 
-@pytest.fixture
-def one_thread():
-    # The 1,000-step runs are many small ops: on a loaded 2-core machine one thread is several
-    # times faster than two competing for the cores.
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
-
-
 def test_import_hgm_repro_registers_the_env_without_loading_torch():
     root = Path(hgm_repro.__file__).resolve().parents[1]
     code = ("import sys, gymnasium, hgm_repro; spec = gymnasium.spec(hgm_repro.envs.ENV_ID); "

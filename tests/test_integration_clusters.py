@@ -27,7 +27,9 @@ from pathlib import Path
 
 import pytest
 
-from .test_integration_mlflow_server import REPO_ROOT, free_port, mlflow_server_on, postgres_cluster
+from tests.helpers import REPO_ROOT
+from tests.helpers.cli import environment
+from tests.helpers.servers import free_port, mlflow_server_on, postgres_cluster
 
 pytestmark = pytest.mark.integration
 SLURM_SCRIPT = REPO_ROOT / ".ci" / "slurm_cluster.sh"
@@ -56,10 +58,6 @@ def store_server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
     """One PostgreSQL-backed MLflow server for both engines (each logs to its own experiment)."""
     with postgres_cluster() as postgres, mlflow_server_on(postgres, tmp_path_factory.mktemp("server")) as url:
         yield url
-
-
-def environment(**extra: str) -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")]), **extra}
 
 
 def launch(cwd: Path, args: tuple[str, ...], env: dict[str, str], timeout: float) -> str:

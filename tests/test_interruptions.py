@@ -9,47 +9,12 @@ import random
 import signal
 import subprocess
 import time
-from collections import Counter, defaultdict
+from collections import defaultdict
 from pathlib import Path
 
 import pytest
 
-from .test_sweep import by_stage, command, environment, hgm, store_runs
-
-# Smoke sizes cut further: a job is a few seconds of training and evaluation on a busy CPU.
-TINY = ("experiment=smoke", "tracking.log_gif=false", "learner.total_steps=128", "learner.warmup_steps=32",
-        "learner.batch_size=8", "learner.checkpoint_every=32", "learner.log_every=32", "learner.test_steps=32",
-        "learner.torch_threads=1")
-
-
-def client(launch: Path):
-    from mlflow.tracking import MlflowClient
-
-    return MlflowClient(tracking_uri=f"sqlite:///{launch.resolve()}/mlflow.db")
-
-
-def check_store(launch: Path, cells: set[tuple[str, str, str]], train_keys: int) -> list:
-    """One FINISHED training per key, one FINISHED evaluation per cell, nothing RUNNING, each metric
-    step logged once, and every checkpoint on disk complete."""
-    from hgm_repro.contracts.checkpoint import load_checkpoint
-
-    runs = store_runs(launch)
-    assert [r.info.run_name for r in runs if r.info.status == "RUNNING"] == []
-    trainings = Counter(r.data.tags["train_key"] for r in by_stage(runs, "train") if r.info.status == "FINISHED")
-    assert len(trainings) == train_keys and set(trainings.values()) == {1}, trainings
-    evaluations = Counter((r.data.tags["model"], r.data.tags["scenario"], r.data.tags["seed"])
-                          for r in by_stage(runs, "eval") if r.info.status == "FINISHED")
-    assert set(evaluations) == cells and set(evaluations.values()) == {1}, evaluations
-    store = client(launch)
-    for run in by_stage(runs, "train"):
-        for key in run.data.metrics:
-            steps = Counter(m.step for m in store.get_metric_history(run.info.run_id, key))
-            assert [s for s, n in steps.items() if n > 1] == [], (run.info.run_id, key, steps)
-    checkpoints = sorted((launch / "checkpoints").glob("*/*.pt"))
-    assert checkpoints
-    for path in checkpoints:
-        load_checkpoint(path)  # raises on a half-written or foreign file
-    return runs
+from tests.helpers.cli import TINY, by_stage, check_store, client, command, environment, hgm
 
 
 def test_sigusr2_under_submitit_requeues_and_the_requeued_job_resumes(tmp_path: Path) -> None:

@@ -19,8 +19,7 @@ from hgm_repro.learner.exploration import LANE_CHANGES, EpsilonGreedy, random_ac
 from hgm_repro.learner.grouped import check_group
 from hgm_repro.models.builders import make_actor, make_network
 from hgm_repro.simulator import N_ACTIONS
-
-from .test_learner import Recorder, compose_cfg, compose_job
+from tests.helpers.learner import Recorder, compose_cfg, compose_job
 
 
 def test_epsilon_falls_to_eps_end_then_to_the_floor():

@@ -20,12 +20,11 @@ from hgm_repro.app.store import (
     resolve_location,
 )
 from hgm_repro.app.sweep import _sweep_time
-
-ROOT = Path(__file__).resolve().parents[1]
+from tests.helpers import REPO_ROOT
 
 
 def _check_script():
-    spec = importlib.util.spec_from_file_location("mlflow_ui_check", ROOT / "scripts" / "mlflow_ui_check.py")
+    spec = importlib.util.spec_from_file_location("mlflow_ui_check", REPO_ROOT / "scripts" / "mlflow_ui_check.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module

@@ -15,8 +15,8 @@ from analysis.bundle import TABLE_FILES
 from analysis.figures import image_variance
 from analysis.labels import fmt
 from analysis.report import SECTION_TITLES
-
-from .test_sweep import hgm
+from tests.helpers import pdf_text
+from tests.helpers.cli import hgm
 
 
 @pytest.fixture(scope="module")
@@ -24,10 +24,6 @@ def swept(tmp_path_factory: pytest.TempPathFactory) -> Path:
     cwd = tmp_path_factory.mktemp("sweep")
     hgm(cwd, "-m", "experiment=smoke", "model=proposed,human", "scenario=1,5", "tracking.log_gif=false")
     return cwd
-
-
-def _pdf_text(path: Path) -> str:
-    return " ".join(" ".join(page.extract_text() or "" for page in PdfReader(str(path)).pages).split())
 
 
 @pytest.fixture(scope="module")
@@ -40,7 +36,7 @@ def store_report(swept: Path) -> Path:
 def test_report_from_a_real_smoke_sweep(swept: Path, store_report: Path) -> None:
     uri = f"sqlite:///{swept / 'mlflow.db'}"
     out = store_report
-    text = _pdf_text(out / "report.pdf")
+    text = pdf_text(out / "report.pdf")
     for title in SECTION_TITLES:
         assert title in text, title
     # Every evaluation mean in the store appears, formatted, in the report's tables.
@@ -96,8 +92,8 @@ def test_report_from_a_bundle_of_the_real_sweep(swept: Path, store_report: Path)
         text = re.sub(r"Generated \d{4}-\d\d-\d\d \d\d:\d\d", "Generated", text)
         return re.sub(r"Data .*? Experiment ", "Data Experiment ", text)  # the store's path, or the bundle's name
 
-    bundle_text = _pdf_text(out / "report.pdf")
-    assert undated(bundle_text) == undated(_pdf_text(store_report / "report.pdf"))
+    bundle_text = pdf_text(out / "report.pdf")
+    assert undated(bundle_text) == undated(pdf_text(store_report / "report.pdf"))
     # Built from a bundle, the report names the bundle, never the machine the store was on.
     assert "Data results bundle bundle/" in bundle_text
     assert str(swept) not in bundle_text and "sqlite:" not in bundle_text

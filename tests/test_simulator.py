@@ -10,8 +10,7 @@ from scipy import stats
 
 from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.simulator import HOST, Action, ConfigError
-
-from .sim_helpers import calm, empty_road, make_sim, place
+from tests.helpers.sim import calm, empty_road, make_sim, place
 
 KMH = 1 / 3.6
 

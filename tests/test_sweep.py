@@ -3,49 +3,20 @@ parallel jobs that share a key, and a training killed mid-way that resumes."""
 
 from __future__ import annotations
 
-import os
 import re
 import signal
 import subprocess
-import sys
 import time
 from pathlib import Path
 
 import pytest
 
 from hgm_repro.contracts.config_files import CONF_DIR
+from tests.helpers.cli import by_stage, command, environment, hgm, store_runs
 
-REPO_ROOT = CONF_DIR.parent
 JOB_TAGS = ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty")
 EVAL_METRICS = ("eval/avg_speed_kmh", "eval/lane_changes", "eval/overtakes", "eval/collisions",
                 "eval/dangerous_actions", "eval/episode_return")
-
-
-def command(*args: str) -> list[str]:
-    return [sys.executable, "-m", "hgm_repro", *args]
-
-
-def environment() -> dict[str, str]:
-    return {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
-
-
-def hgm(cwd: Path, *args: str, timeout: float = 900) -> subprocess.CompletedProcess[str]:
-    out = subprocess.run(command(*args), cwd=cwd, env=environment(), capture_output=True, text=True,
-                         timeout=timeout)
-    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-5000:]
-    return out
-
-
-def store_runs(launch: Path) -> list:
-    from mlflow.tracking import MlflowClient
-
-    client = MlflowClient(tracking_uri=f"sqlite:///{launch.resolve()}/mlflow.db")
-    experiment = client.get_experiment_by_name("hgm_repro")
-    return client.search_runs([experiment.experiment_id], max_results=1000)
-
-
-def by_stage(runs: list, stage: str) -> list:
-    return [r for r in runs if r.data.tags.get("stage") == stage]
 
 
 def check_sweep(launch: Path, trainings: int, evaluations: int) -> list:

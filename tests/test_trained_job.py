@@ -3,9 +3,6 @@ trained host, the network logged as an MLflow model, and the runs as the MLflow 
 
 from __future__ import annotations
 
-import os
-import subprocess
-import sys
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -13,9 +10,7 @@ import pytest
 import torch
 from PIL import Image
 
-from hgm_repro.contracts.config_files import CONF_DIR
-
-REPO_ROOT = CONF_DIR.parent
+from tests.helpers.cli import hgm
 
 
 @pytest.fixture(scope="module")
@@ -23,10 +18,7 @@ def job(tmp_path_factory: pytest.TempPathFactory) -> SimpleNamespace:
     from mlflow.tracking import MlflowClient
 
     launch = tmp_path_factory.mktemp("launch").resolve()
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")])}
-    command = [sys.executable, "-m", "hgm_repro", "experiment=smoke", "scenario=3", "tracking.log_gif=false"]
-    out = subprocess.run(command, cwd=launch, env=env, capture_output=True, text=True, timeout=900)
-    assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-5000:]
+    out = hgm(launch, "experiment=smoke", "scenario=3", "tracking.log_gif=false")
     client = MlflowClient(tracking_uri=f"sqlite:///{launch}/mlflow.db")
     experiment = client.get_experiment_by_name("hgm_repro")
     runs = client.search_runs([experiment.experiment_id])

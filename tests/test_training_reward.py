@@ -41,8 +41,7 @@ def test_batched_time_windows_keep_their_shape():
 def test_non_positive_collision_weight_is_refused(bad):
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
-
-    from .test_learner import compose_cfg
+    from tests.helpers.learner import compose_cfg
 
     with pytest.raises(ConfigError, match="collision_weight"):
         validate(compose_cfg(bad))
@@ -53,8 +52,7 @@ def test_training_with_a_weighted_crash_runs_to_the_end(tmp_path, grouped):
     from hgm_repro.contracts.checkpoint import load_checkpoint
     from hgm_repro.learner import train
     from hgm_repro.learner.grouped import train_group
-
-    from .test_learner import compose_job
+    from tests.helpers.learner import compose_job
 
     jobs = [compose_job("learner.collision_weight=5", f"seed={s}") for s in (0, 1)]
     if grouped:
