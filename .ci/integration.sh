@@ -16,7 +16,7 @@ if [ "$(id -u)" -eq 0 ] && ! id postgres >/dev/null 2>&1; then
     useradd --system --no-create-home --shell /usr/sbin/nologin postgres
 fi
 
-# The MLflow UI test (tests/test_mlflow_ui.py) opens the UI in Debian's headless Chromium.
+# The MLflow UI test (tests/integration/test_mlflow_ui.py) opens the UI in Debian's headless Chromium.
 if ! command -v chromium >/dev/null 2>&1; then
     SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
     $SUDO apt-get update -qq
@@ -28,8 +28,8 @@ if ! python -c "import psycopg2" 2>/dev/null; then
     python -m pip install -q "psycopg2-binary>=2.9"
 fi
 
-# A single-node SLURM cluster (tests/test_integration_clusters.py starts and stops its daemons):
-# Debian's slurm-wlm, slurmdbd, munge and mariadb-server (slurmdbd keeps accounting for sacct).
+# A single-node SLURM cluster (tests/integration/test_integration_clusters.py starts and stops its
+# daemons): Debian's slurm-wlm, slurmdbd, munge and mariadb-server (slurmdbd keeps accounting for sacct).
 bash .ci/slurm_cluster.sh install
 
 # Ray: the `ray` extra, installed here only (it holds cloudpickle below 3 and so joblib below 1.6,

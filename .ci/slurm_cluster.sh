@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# A single-node SLURM cluster on this machine, for tests/test_integration_clusters.py:
+# A single-node SLURM cluster on this machine, for tests/integration/test_integration_clusters.py:
 # munge (authentication), MariaDB + slurmdbd (accounting, so that `sacct` shows requeues),
 # slurmctld and slurmd on 127.0.0.1, one partition `ci` holding this machine.
 #

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-REPO = Path(__file__).resolve().parents[1]
+from tests.helpers import REPO_ROOT
 
 # The floors of docs/architecture (a module may import its own floor and the ones below).
 FLOORS = {
@@ -108,20 +108,20 @@ def test_the_graph_reader_sees_local_and_relative_imports(tmp_path):
 
 def test_no_import_points_to_a_higher_floor():
     upward = [f"{a} (floor {floor(a)}) imports {b} (floor {floor(b)})"
-              for a, targets in import_graph(REPO, "hgm_repro").items() for b in sorted(targets)
+              for a, targets in import_graph(REPO_ROOT, "hgm_repro").items() for b in sorted(targets)
               if floor(b) > floor(a)]
     assert not upward, "\n".join(upward)
 
 
 @pytest.mark.parametrize("package", ["hgm_repro", "studies", "analysis"])
 def test_no_import_cycle(package):
-    graph = import_graph(REPO, package)
+    graph = import_graph(REPO_ROOT, package)
     if package == "studies":  # scripts import each other by their bare names (studies/ is on sys.path)
         names = {m.split(".")[-1] for m in graph}
-        for path in (REPO / "studies").glob("*.py"):
+        for path in (REPO_ROOT / "studies").glob("*.py"):
             for node in ast.walk(ast.parse(path.read_text())):
                 if isinstance(node, ast.ImportFrom) and node.module in names and not node.level:
-                    graph[_module_name(path, REPO)].add(f"studies.{node.module}")
+                    graph[_module_name(path, REPO_ROOT)].add(f"studies.{node.module}")
                 elif isinstance(node, ast.Import):
-                    graph[_module_name(path, REPO)] |= {f"studies.{a.name}" for a in node.names if a.name in names}
+                    graph[_module_name(path, REPO_ROOT)] |= {f"studies.{a.name}" for a in node.names if a.name in names}
     assert not cycles(graph)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import tomllib
-from pathlib import Path
 
 import pytest
 import yaml
@@ -11,8 +10,7 @@ import yaml
 import hgm_repro
 from hgm_repro import __main__ as cli
 from hgm_repro.contracts.config_files import find_conf_dir
-
-REPO_ROOT = Path(hgm_repro.__file__).resolve().parents[1]
+from tests.helpers import REPO_ROOT
 
 
 def test_config_lookup_prefers_the_shipped_copy_then_the_checkout(tmp_path):

@@ -155,7 +155,7 @@ print(f"simulator + camera + HGM, 64 envs on {device}: {row['env_steps_per_s']} 
       f"({time.perf_counter() - start:.1f} s with set-up)")
 EOF
       if [ "$DEVICE" != cpu ]; then
-        bounded 90 "$PY" -m pytest -q -p no:cacheprovider tests/test_simulator.py -k cpu_and_cuda_agree || status=1
+        bounded 90 "$PY" -m pytest -q -p no:cacheprovider tests/simulator/test_simulator.py -k cpu_and_cuda_agree || status=1
       fi
       ;;
     bench)
