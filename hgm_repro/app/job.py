@@ -317,14 +317,14 @@ def _log_trained(job: JobConfig, tracker: Tracker, run_id: str, checkpoint: Path
 
 
 def train_grouped(jobs: list[JobConfig], tracker: Tracker, parent_run_id: str | None) -> list[str]:
-    """Train the jobs' distinct, not yet finished trainings in groups (`hgm_repro.runtime.grouped`):
+    """Train the jobs' distinct, not yet finished trainings in groups (`hgm_repro.learner.grouped`):
     each member is its own training run under `parent_run_id`, exactly as a job's solo training
     would be, so that the jobs afterwards find them FINISHED and only evaluate. Returns the
     train_keys trained. A key another process holds the lock of is left to the jobs."""
     from contextlib import ExitStack
 
     from ..learner import train_group
-    from ..runtime.grouped import group_key
+    from ..learner.grouped import group_key
 
     commit, dirty = git_info()
     groups: dict[str, list[JobConfig]] = {}

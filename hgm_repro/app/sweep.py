@@ -17,7 +17,7 @@ from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 from ..contracts.errors import BAD_INPUT_EXIT, ConfigError
 from ..contracts.interrupts import JobInterrupted, hand_on, signals_raise
 from ..contracts.schema import validate
-from ..runtime.grouped import use_grouped
+from ..learner.grouped import use_grouped
 from .job import train_grouped
 from .provenance import launch_description, launch_tags
 from .store import CURVES_VIEW, PARENT_RUN_ENV, Tracker, resolve_location
@@ -113,7 +113,7 @@ class SweepTracking(Callback):
 
     def _train_grouped(self, config: DictConfig, tracker: Tracker) -> None:
         """Before the jobs start: train the sweep's trainings in groups where `runtime.grouped` says
-        so (`hgm_repro.runtime.grouped`); the jobs then find them FINISHED and only evaluate."""
+        so (`hgm_repro.learner.grouped`); the jobs then find them FINISHED and only evaluate."""
         task = [str(o) for o in OmegaConf.to_container(config.hydra.overrides.task, resolve=False)]
         # Expanding the sweep costs a compose per job: only when a job may group.
         deciders = ("runtime.grouped", "device", "learner", "experiment")

@@ -61,7 +61,7 @@ def episode_metrics(state: TrafficState) -> dict[str, torch.Tensor]:
 class HighwaySimulator:
     """Holds the parameters, the random generators and the state of `n_envs` envs.
 
-    `seed` is one seed, or one seed per training member of a group (`hgm_repro.runtime.grouped`):
+    `seed` is one seed, or one seed per training member of a group (`hgm_repro.learner.grouped`):
     then the envs form len(seed) contiguous blocks of n_envs / len(seed), and each block draws its
     traffic from its own generator only, so that a member's traffic is the same alone or in any group.
     """

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 import torch
-from hgm_repro.runtime.grouped import check_group
+from hgm_repro.learner.grouped import check_group
 
 from hgm_repro.contracts.checkpoint import load_checkpoint
 from hgm_repro.contracts.config_files import scenario_config, simulator_config
@@ -108,7 +108,7 @@ def test_grouped_setting_changes_neither_train_key_nor_evaluation_key():
 
 
 def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
-    from hgm_repro.runtime.grouped import use_grouped
+    from hgm_repro.learner.grouped import use_grouped
 
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
