@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
-# The published results (docs/results/): the paper's grid over seeds 0-4 and the three reference
-# hosts at one preset, then the results bundle and the report's figures and tables.
+# The published results (docs/results/): the paper's grid (conf/grid/paper.yaml: seeds 0-4) and the
+# three reference hosts (conf/grid/references.yaml) at one preset, then the results bundle and the
+# report's figures and tables.
 #
 #   bash studies/publish_results.sh [extra Hydra overrides, e.g. experiment=paper device=cuda]
 #
@@ -24,12 +25,12 @@ publish() {
 }
 for model in proposed references min coordinate; do
   if [ "$model" = references ]; then
-    models=human,idm_mobil,idm_mobil_limits
+    grid=(grid=references)  # conf/grid/references.yaml: the reference hosts in the same cells
   else
-    models=$model
+    grid=(grid=paper "model=$model")  # conf/grid/paper.yaml, one model at a time
   fi
-  # seed varies fastest (Hydra's sweep order): the first jobs are the distinct trainings, so that
+  # seed varies fastest (the grid's order): the first jobs are the distinct trainings, so that
   # the two parallel jobs never wait on the same training; later scenarios reuse them.
-  python -m hgm_repro -m scenario=1,2,3,4,5 "model=$models" seed=0,1,2,3,4 launcher=joblib "$@"
+  python -m hgm_repro -m "${grid[@]}" launcher=joblib "$@"
   publish
 done

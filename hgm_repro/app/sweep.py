@@ -43,7 +43,11 @@ def _sweep_jobs(config: DictConfig) -> list[Any]:
 
     if not str(config.hydra.sweeper.get("_target_", "")).endswith("BasicSweeper"):
         return []
-    overrides = OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
+    # The sweeper's own params (a grid config such as grid=paper) first: the command line's values
+    # replace them, as in BasicSweeper.sweep.
+    params = config.hydra.sweeper.get("params") or {}
+    overrides = [f"{k}={v}" for k, v in params.items()]
+    overrides += OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
     batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(overrides), None)
     jobs = []
     for batch in batches:

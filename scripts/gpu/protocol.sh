@@ -47,16 +47,18 @@ RUNS=${RUNS:-$ROOT/studies/runs/gpu}  # the store, checkpoints and bundle (on th
 DEVICE=${DEVICE:-cuda}
 EXPERIMENT=${EXPERIMENT:-paper}
 if [ "$DEVICE" = cpu ]; then cpu=1; else cpu=0; fi
+# The paper's grid is one config (conf/grid/paper.yaml, references.yaml), read here as it is written.
+grid_value() { sed -n "s/^ *$2: *//p" "conf/grid/$1.yaml" | tr -d "\"'"; }
 # A CPU rehearsal runs every step on a smaller grid: on a 2-core CPU a test cell takes seconds (half
 # a minute with 1,024 envs), so 150 of them would not fit, and its 2 cores run 2 cells at once.
-SEEDS=${SEEDS:-$([ $cpu = 1 ] && echo 0,1 || echo 0,1,2,3,4)}
-SCENARIOS=${SCENARIOS:-$([ $cpu = 1 ] && echo 1,2 || echo 1,2,3,4,5)}
+SEEDS=${SEEDS:-$([ $cpu = 1 ] && echo 0,1 || grid_value paper seed)}
+SCENARIOS=${SCENARIOS:-$([ $cpu = 1 ] && echo 1,2 || grid_value paper scenario)}
 # 1,024 test envs drive one complete episode each per cell: 245,760 decisions, Table 4's 200,000
 # rounded up to whole episodes, in one pass (64 envs would take 14 passes).
 TEST_ENVS=${TEST_ENVS:-$([ $cpu = 1 ] && echo 4 || echo 1024)}
 JOBS=${JOBS:-$([ $cpu = 1 ] && echo 2 || echo 8)}
-LEARNED=proposed,min,coordinate
-REFERENCES=human,idm_mobil,idm_mobil_limits
+LEARNED=$(grid_value paper model)
+REFERENCES=$(grid_value references model)
 count() { local IFS=,; set -- $1; echo $#; }
 N_SEEDS=$(count "$SEEDS")
 N_SCENARIOS=$(count "$SCENARIOS")
