@@ -11,7 +11,6 @@ from pathlib import Path
 
 import pytest
 
-from hgm_repro.contracts.config_files import CONF_DIR
 from tests.helpers.cli import by_stage, command, environment, hgm, store_runs
 
 JOB_TAGS = ("model", "scenario", "seed", "stage", "train_key", "git_commit", "git_dirty")
@@ -140,10 +139,6 @@ def test_killed_training_resumes_into_one_finished_run(tmp_path: Path, sig: sign
 
 
 
-VALIDATION_IN_LEARNER = "eval_every" in (CONF_DIR / "learner" / "dqn.yaml").read_text()
-
-
-@pytest.mark.skipif(not VALIDATION_IN_LEARNER, reason="the learner has no validation (eval.val_every) yet")
 def test_optuna_preset_tunes_on_the_validation_return(tmp_path: Path) -> None:
     import yaml
     from mlflow.tracking import MlflowClient

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import pytest
 import torch
-from hgm_repro.learner.grouped import check_group
 
 from hgm_repro.contracts.checkpoint import load_checkpoint
 from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.learner import train, train_group
+from hgm_repro.learner.grouped import check_group
 from hgm_repro.simulator import HighwaySimulator
 from tests.helpers.learner import Recorder, compose_job
 
@@ -108,10 +108,9 @@ def test_grouped_setting_changes_neither_train_key_nor_evaluation_key():
 
 
 def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
-    from hgm_repro.learner.grouped import use_grouped
-
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
+    from hgm_repro.learner.grouped import use_grouped
     from tests.helpers.learner import compose_cfg
 
     assert use_grouped("auto", "cuda:0") and not use_grouped("auto", "cpu")
