@@ -28,6 +28,7 @@ from ..contracts.checkpoint import (
     BEST_CHECKPOINT,
     EMA_CHECKPOINT,
     FINAL_CHECKPOINT,
+    LAST_CHECKPOINT,
     CheckpointMismatchError,
     weights_file,
 )
@@ -160,14 +161,19 @@ def run_job(
 # --- training -----------------------------------------------------------------------------
 
 
+def training_lock(tracker: Tracker, key: str) -> tuple[FileLock, Path]:
+    """The train_key's checkpoint folder and the lock its one trainer holds (jobs and groups alike)."""
+    checkpoint_dir = tracker.location.checkpoint_root / key
+    checkpoint_dir.mkdir(parents=True, exist_ok=True)
+    return FileLock(str(checkpoint_dir / "train.lock")), checkpoint_dir
+
+
 def obtain_checkpoint(
     job: JobConfig, key: str, tracker: Tracker, tags: dict[str, Any],
     parent_run_id: str | None, train_fn: TrainFn | None,
 ) -> Training:
     """The key's finished checkpoint: from the store if there is one, else by training now."""
-    checkpoint_dir = tracker.location.checkpoint_root / key
-    checkpoint_dir.mkdir(parents=True, exist_ok=True)
-    lock = FileLock(str(checkpoint_dir / "train.lock"))
+    lock, checkpoint_dir = training_lock(tracker, key)
     try:
         lock.acquire(timeout=0)
     except Timeout:
@@ -280,7 +286,7 @@ def _open_training(
         # The killed attempt may have logged steps beyond its last checkpoint: keep those and log
         # only later steps, so that each step appears once (no store API deletes metric values).
         logged = tracker.logged_steps(run_id)
-        log.info("resuming training run %s from %s", run_id, checkpoint_dir / "last.pt")
+        log.info("resuming training run %s from %s", run_id, checkpoint_dir / LAST_CHECKPOINT)
     else:
         how = "trained"
         run_id = tracker.start_run(f"{job.model.name} seed{job.seed} training {key}", job_tags, parent_run_id,
@@ -341,9 +347,7 @@ def train_grouped(jobs: list[JobConfig], tracker: Tracker, parent_run_id: str | 
             ready, opened = [], []
             for job in members:
                 key = train_key(job)
-                checkpoint_dir = tracker.location.checkpoint_root / key
-                checkpoint_dir.mkdir(parents=True, exist_ok=True)
-                lock = FileLock(str(checkpoint_dir / "train.lock"))
+                lock, checkpoint_dir = training_lock(tracker, key)
                 try:
                     lock.acquire(timeout=0)
                 except Timeout:
