@@ -20,7 +20,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.curves import area_values, by_model, final_values, fluctuation_values
-from analysis.labels import CV_RATIO, SCENARIOS, fmt, model_label
+from analysis.labels import SCENARIOS, fmt, model_label
+from analysis.scenarios import PAPER_CV_RATIO
 from analysis.stats import Estimate, difference_ci, probability_of_improvement, slope_ci, slope_difference_ci
 from analysis.tables import per_scenario
 
@@ -186,7 +187,11 @@ def claim5(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
 
 
 def _by_cv(evals: pd.DataFrame, model: str) -> dict[float, np.ndarray]:
-    return {CV_RATIO[s]: v for s, v in per_scenario(evals, model, "episode_return", list(SCENARIOS)).items()}
+    """Per-seed returns keyed by the scenario's connected-vehicle share (`cv_ratio`, as logged)."""
+    ratio = evals.groupby(evals["scenario"].astype(str))["cv_ratio"].first().to_dict() if "cv_ratio" in evals \
+        else PAPER_CV_RATIO
+    return {float(ratio.get(s, PAPER_CV_RATIO[s])): v
+            for s, v in per_scenario(evals, model, "episode_return", list(SCENARIOS)).items()}
 
 
 def claim6(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimResult:

@@ -15,15 +15,16 @@ import seaborn as sns  # noqa: E402
 
 from analysis.curves import bin_curves  # noqa: E402
 from analysis.labels import (  # noqa: E402
-    CV_RATIO,
     LEARNED,
     METRIC_LABELS,
     PALETTE,
     REFERENCE_HOSTS,
+    SCENARIOS,
     model_label,
     ordered_models,
     ordered_scenarios,
 )
+from analysis.scenarios import PAPER_CV_RATIO  # noqa: E402
 
 FORMATS = ("png", "pdf", "svg")
 TRAINING_FIGURES = {  # file stem -> (train metric, matching eval metric for reference lines, paper figure)
@@ -103,11 +104,12 @@ def training_figure(curves: pd.DataFrame, evals: pd.DataFrame, stem: Path) -> di
 
 def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
     """Mean and 95 % CI over seeds of each test metric per scenario (x = CV ratio), one line per method."""
-    data = evals[evals["scenario"].isin(list(CV_RATIO))]
+    data = evals[evals["scenario"].astype(str).isin(SCENARIOS)]
     if data.empty:
         return None
     _style()
-    data = data.assign(cv=data["scenario"].map(CV_RATIO))
+    cv = data["cv_ratio"] if "cv_ratio" in data else data["scenario"].astype(str).map(PAPER_CV_RATIO)
+    data = data.assign(cv=cv)
     models = ordered_models(data["model"])
     fig, axes = plt.subplots(2, 3, figsize=(10.0, 6.2), sharex=True)
     for ax, metric in zip(axes.ravel(), TEST_METRICS, strict=True):
@@ -147,7 +149,7 @@ def make_figures(curves: pd.DataFrame, evals: pd.DataFrame, out_dir: Path) -> di
 
 
 def scenarios_present(evals: pd.DataFrame) -> list[str]:
-    return [s for s in ordered_scenarios(evals["scenario"]) if s in CV_RATIO]
+    return [s for s in ordered_scenarios(evals["scenario"]) if s in SCENARIOS]
 
 
 def image_variance(path: Path) -> float:

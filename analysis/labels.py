@@ -29,9 +29,9 @@ PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "hu
            "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "idm_limits": "#c9a227",
            "random": "#b08d57"}
 
-# Table 5: the connected-vehicle ratio of each test scenario.
+# The paper's test scenarios (Table 5), in its order; their traffic mix is what the runs logged
+# (analysis/scenarios.py).
 SCENARIOS = ("1", "2", "3", "4", "5")
-CV_RATIO = {"1": 0.0, "2": 0.25, "3": 0.5, "4": 0.75, "5": 1.0}
 
 METRIC_LABELS = {
     "episode_return": "Episode return",

@@ -20,6 +20,7 @@ SNAPSHOT_STEPS = 20  # decisions driven before the picture, so traffic has sprea
 @dataclass
 class ScenarioPicture:
     scenario: str
+    cv_ratio: float  # the connected-vehicle share of the scenario config it was drawn from
     camera: np.ndarray  # H x W x 3 uint8
     hgm: np.ndarray  # H x W x 3 uint8, as the network sees it (v in [-1, 1] stored as (v + 1) * 127.5)
 
@@ -50,7 +51,8 @@ def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
     from hgm_repro.simulator import Action, HighwaySimulator
 
     sim_cfg = simulator_config()
-    sim = HighwaySimulator(sim_cfg, scenario_config(scenario, sim_cfg), n_envs=1, seed=seed)
+    traffic = scenario_config(scenario, sim_cfg)
+    sim = HighwaySimulator(sim_cfg, traffic, n_envs=1, seed=seed)
     settings = _observation_settings()
     settings.update(camera="front", hgm="paper", coordinates=False, frame_stack=1)
     builder = ObservationBuilder(sim, ObservationConfig(**settings))
@@ -59,7 +61,8 @@ def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
     for _ in range(SNAPSHOT_STEPS):
         sim.step(keep)
     frame = builder.frame()
-    return ScenarioPicture(scenario, _to_hwc(frame["camera"][0, -3:]), _to_hwc(frame["hgm"][0, -3:]))
+    return ScenarioPicture(scenario, float(traffic.ratios.get("NCV", 0.0)), _to_hwc(frame["camera"][0, -3:]),
+                           _to_hwc(frame["hgm"][0, -3:]))
 
 
 def scenario_pictures(scenarios: list[str], seed: int = 0) -> tuple[list[ScenarioPicture], str | None]:
@@ -79,15 +82,12 @@ def pictures_figure(pictures: list[ScenarioPicture], stem: Path) -> dict[str, Pa
     import matplotlib.pyplot as plt
 
     from analysis.figures import save
-    from analysis.labels import CV_RATIO
 
     n = len(pictures)
     fig, axes = plt.subplots(2, n, figsize=(2.0 * n + 1.0, 4.6), squeeze=False)
     for col, pic in enumerate(pictures):
         axes[0, col].imshow(pic.camera, interpolation="nearest")
-        ratio = CV_RATIO.get(pic.scenario)
-        axes[0, col].set_title(f"Scenario {pic.scenario}" + (f"\nCV {ratio:.2f}" if ratio is not None else ""),
-                               fontsize=10)
+        axes[0, col].set_title(f"Scenario {pic.scenario}\nCV {pic.cv_ratio:.2f}", fontsize=10)
         value = pic.hgm[..., 0].astype(float) / 127.5 - 1.0
         im = axes[1, col].imshow(value, cmap="RdBu_r", vmin=-1, vmax=1, interpolation="nearest")
         for row in (0, 1):

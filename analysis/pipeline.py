@@ -21,6 +21,7 @@ from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import ReportInputs, fmt_estimate, write_report
 from analysis.scale import is_smoke, scale_text
+from analysis.scenarios import scenario_mix, with_cv_ratio
 from analysis.stats import mean_ci
 from hgm_repro.contracts.config_tree import flatten
 
@@ -176,7 +177,7 @@ def _config_runs(configs: dict[str, str]) -> dict[str, str]:
 def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outputs:
     """Everything `python -m analysis` writes, from one loaded store."""
     out_dir.mkdir(parents=True, exist_ok=True)
-    evals = data.evals
+    evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)
     pictures_note = None
     if pictures:
@@ -211,7 +212,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         test_grids=grids, paper_table=tables.paper_table6(), aggregate=_aggregate_text(evals, scenarios),
         claims=results, discussion=discussion(results, counts, len(train_runs), evals),
         configs=_config_texts(data.configs),
-        git_dirty=data.git_dirty,
+        git_dirty=data.git_dirty, scenario_mix=scenario_mix(data.runs),
         train_keys=sorted(str(k) for k in train_runs["train_key"].dropna().unique()),
         scale=scale_text(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
         config_runs=_config_runs(data.configs),

@@ -14,7 +14,8 @@ from fpdf.fonts import FontFace
 from PIL import Image
 
 from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
-from analysis.labels import CV_RATIO, METRIC_LABELS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
+from analysis.labels import METRIC_LABELS, SCENARIOS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
+from analysis.scenarios import PAPER_CV_RATIO
 
 # matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
 # latin-1 core fonts.
@@ -48,6 +49,7 @@ class ReportInputs:
     configs: dict[str, str]  # model -> resolved config text (or a diff against the first)
     train_keys: list[str] = field(default_factory=list)  # of the training runs
     git_dirty: str = ""  # "true"/"false"/"mixed" from the runs' git_dirty tags
+    scenario_mix: pd.DataFrame | None = None  # scenario x NCV/AHV/CHV, as the evaluation runs logged it
     scale: str = ""  # preset, steps, images, checkpoint, episodes per cell, beside the paper's
     smoke: bool = False  # made with the smoke preset: not a result
     source: str = ""  # where the data came from, as the cover names it (no machine path for a bundle)
@@ -255,7 +257,7 @@ def _data_section(w: ReportWriter, inp: ReportInputs) -> None:
     else:
         frame = inp.seed_counts.copy()
         frame.index = [model_label(m) for m in frame.index]
-        frame.columns = [f"Sc. {c}" if c in CV_RATIO else str(c) for c in frame.columns]
+        frame.columns = [f"Sc. {c}" if c in SCENARIOS else str(c) for c in frame.columns]
         w.frame_table(frame, "Method", size=8.5, first_width=2.6)
     if inp.train_seeds:
         w.para("Training runs (seeds) per method: " + ", ".join(f"{model_label(m, True)} {n}"
@@ -288,9 +290,17 @@ def _environment_section(w: ReportWriter, inp: ReportInputs) -> None:
         types.index = [VEHICLE_PARAMETERS.get(str(k), str(k)) for k in types.index]
         w.frame_table(types, "Parameter", size=7.5, first_width=3.2)
     w.heading("Test scenarios (paper Table 5)")
-    rows = [["Scenario", *CV_RATIO.keys()], ["CV ratio", *[f"{v:.2f}" for v in CV_RATIO.values()]],
-            ["AHV ratio", *[f"{(1 - v) / 2:.3f}" for v in CV_RATIO.values()]],
-            ["CHV ratio", *[f"{(1 - v) / 2:.3f}" for v in CV_RATIO.values()]]]
+    mix = inp.scenario_mix
+    if mix is not None and not mix.empty:
+        w.para("The traffic mix each scenario's evaluation runs logged (scenario.ratios).", size=8.5)
+        names = [s for s in (*SCENARIOS, *sorted(set(mix.index) - set(SCENARIOS))) if s in mix.index]
+        rows = [["Scenario", *names], *[[f"{t} ratio", *[f"{mix.loc[s, t]:.3f}" for s in names]]
+                                        for t in ("NCV", "AHV", "CHV")]]
+    else:  # runs that logged no mix: the paper's table
+        w.para("The runs logged no traffic mix: the paper's Table 5.", size=8.5)
+        rows = [["Scenario", *PAPER_CV_RATIO], ["NCV ratio", *[f"{v:.3f}" for v in PAPER_CV_RATIO.values()]],
+                ["AHV ratio", *[f"{(1 - v) / 2:.3f}" for v in PAPER_CV_RATIO.values()]],
+                ["CHV ratio", *[f"{(1 - v) / 2:.3f}" for v in PAPER_CV_RATIO.values()]]]
     w.table(rows, size=8.5)
     w.heading("What the host sees in each scenario")
     if "scenes" in inp.figures:
@@ -356,7 +366,7 @@ def _grid_table_height(grid: pd.DataFrame) -> float:
 def _grid_table(w: ReportWriter, grid: pd.DataFrame) -> None:
     frame = grid.copy()
     frame.index = [model_label(m, short=True) for m in frame.index]
-    frame.columns = [f"Scenario {c}" if c in CV_RATIO else str(c) for c in frame.columns]
+    frame.columns = [f"Scenario {c}" if c in SCENARIOS else str(c) for c in frame.columns]
     w.frame_table(frame, "Method", size=8, first_width=1.3)
 
 

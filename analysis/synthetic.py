@@ -18,7 +18,8 @@ import pandas as pd
 from mlflow import MlflowClient
 from mlflow.entities import Metric, Param
 
-from analysis.labels import CV_RATIO, LEARNED
+from analysis.labels import LEARNED
+from analysis.scenarios import PAPER_CV_RATIO
 from hgm_repro.contracts.names import REPORTED_METRICS as EPISODE_COLUMNS
 
 
@@ -61,7 +62,7 @@ def synthetic_frames(spec: SyntheticSpec) -> tuple[pd.DataFrame, pd.DataFrame, p
             # One offset per seed and model, shared by all scenarios: a good seed is good everywhere.
             seed_effect = rng.normal(0.0, spec.noise)
             for scenario in spec.scenarios:
-                cv = CV_RATIO.get(scenario, 0.5)
+                cv = PAPER_CV_RATIO.get(scenario, 0.5)
                 means = {
                     "episode_return": spec.return_base.get(model, 1600.0) + spec.return_slope.get(model, 0.0) * cv,
                     "avg_speed_kmh": spec.speed.get(model, 60.0),
