@@ -34,10 +34,9 @@ def _sweep_time(sweep_dir: Path) -> str:
     return sweep_dir.name
 
 
-def _sweep_jobs(config: DictConfig) -> list[Any]:
-    """The validated config of every job of a basic-sweeper sweep (other sweepers choose their
-    jobs as they go: none). A job whose values do not validate is left out; it reports itself."""
-    from hydra import compose
+def sweep_overrides(config: DictConfig) -> list[list[str]]:
+    """The overrides of every job of a basic-sweeper sweep, in the sweeper's order (other sweepers
+    choose their jobs as they go: none)."""
     from hydra._internal.core_plugins.basic_sweeper import BasicSweeper
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
@@ -49,14 +48,21 @@ def _sweep_jobs(config: DictConfig) -> list[Any]:
     overrides = [f"{k}={v}" for k, v in params.items()]
     overrides += OmegaConf.to_container(config.hydra.overrides.task, resolve=False)
     batches = BasicSweeper.split_arguments(OverridesParser.create().parse_overrides(overrides), None)
+    return [list(job) for batch in batches for job in batch]
+
+
+def _sweep_jobs(config: DictConfig) -> list[Any]:
+    """The validated config of every job of a basic-sweeper sweep. A job whose values do not
+    validate is left out; it reports itself."""
+    from hydra import compose
+
     jobs = []
-    for batch in batches:
-        for job_overrides in batch:
-            try:
-                cfg = compose(config_name=str(config.hydra.job.config_name), overrides=list(job_overrides))
-                jobs.append(validate(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])))
-            except (ConfigError, ValueError, KeyError) as error:  # Hydra's own errors are ValueErrors too
-                log.debug("job %s left to itself: %s", job_overrides, error)
+    for job_overrides in sweep_overrides(config):
+        try:
+            cfg = compose(config_name=str(config.hydra.job.config_name), overrides=job_overrides)
+            jobs.append(validate(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])))
+        except (ConfigError, ValueError, KeyError) as error:  # Hydra's own errors are ValueErrors too
+            log.debug("job %s left to itself: %s", job_overrides, error)
     return jobs
 
 

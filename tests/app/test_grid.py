@@ -8,31 +8,40 @@ from collections import Counter
 from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
 
-from hgm_repro.app.sweep import _sweep_jobs
+from hgm_repro.app.sweep import _sweep_jobs, sweep_overrides
 from hgm_repro.contracts.config_files import CONF_DIR
 
 
-def _jobs(*overrides: str, swept: tuple[str, ...] = ()) -> list:
-    """The jobs of `-m <overrides> <swept>`: `swept` values (`seed=0,1`) reach only the sweeper."""
-    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        cfg = compose("config", overrides=list(overrides), return_hydra_config=True)
-        with open_dict(cfg):
-            cfg.hydra.overrides.task = [*overrides, *swept]
-        return _sweep_jobs(cfg)
+def _config(*overrides: str, swept: tuple[str, ...] = ()):
+    """The config the sweep callback sees for `-m <overrides> <swept>` (`swept` values reach only the sweeper)."""
+    cfg = compose("config", overrides=list(overrides), return_hydra_config=True)
+    with open_dict(cfg):
+        cfg.hydra.overrides.task = [*overrides, *swept]
+    return cfg
+
+
+def _cells(jobs: list[list[str]]) -> Counter:
+    return Counter(tuple(sorted(o for o in job if o.split("=")[0] in ("model", "scenario", "seed"))) for job in jobs)
 
 
 def test_the_paper_grid_is_three_models_in_five_scenarios_over_five_seeds():
-    jobs = _jobs("grid=paper", "experiment=smoke")
-    cells = Counter((j.model.name, j.scenario.name, j.seed) for j in jobs)
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        jobs = sweep_overrides(_config("grid=paper"))
+        references = sweep_overrides(_config("grid=references"))
+    cells = _cells(jobs)
     assert len(cells) == 75 and set(cells.values()) == {1}
-    assert {m for m, _, _ in cells} == {"proposed", "min", "coordinate"}
-    assert {s for _, s, _ in cells} == {"1", "2", "3", "4", "5"} and {s for _, _, s in cells} == {0, 1, 2, 3, 4}
-    assert [j.seed for j in jobs[:5]] == [0, 1, 2, 3, 4]  # seed fastest: the distinct trainings come first
+    values = {key: {o.split("=")[1] for job in jobs for o in job if o.startswith(key + "=")}
+              for key in ("model", "scenario", "seed")}
+    assert values == {"model": {"proposed", "min", "coordinate"}, "scenario": {"'1'", "'2'", "'3'", "'4'", "'5'"},
+                      "seed": {"0", "1", "2", "3", "4"}}
+    first = [next(o for o in job if o.startswith("seed=")) for job in jobs[:5]]
+    assert first == [f"seed={s}" for s in range(5)]  # seed varies fastest: the distinct trainings come first
+    assert {o for job in references for o in job if o.startswith("model=")} == \
+        {"model=human", "model=idm_mobil", "model=idm_mobil_limits"} and len(references) == 75
 
 
-def test_a_command_line_value_replaces_the_grids():
-    jobs = _jobs("grid=paper", "experiment=smoke", "model=proposed", swept=("seed=0,1",))
-    assert {(j.model.name, j.seed) for j in jobs} == {("proposed", 0), ("proposed", 1)} and len(jobs) == 10
-    references = _jobs("grid=references", "experiment=smoke", "seed=0")
-    assert {j.model.name for j in references} == {"human", "idm_mobil", "idm_mobil_limits"}
-    assert {j.scenario.name for j in references} == {"1", "2", "3", "4", "5"} and len(references) == 15
+def test_a_command_line_value_replaces_the_grids_and_every_job_validates():
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        jobs = _sweep_jobs(_config("grid=paper", "experiment=smoke", "model=proposed", "scenario='3'",
+                                   swept=("seed=0,1",)))
+    assert sorted((j.model.name, j.scenario.name, j.seed) for j in jobs) == [("proposed", "3", 0), ("proposed", "3", 1)]

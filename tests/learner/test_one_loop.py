@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from hgm_repro.contracts.checkpoint import EMA_CHECKPOINT, load_checkpoint
+from hgm_repro.contracts.checkpoint import EMA_CHECKPOINT, CheckpointMismatchError, load_checkpoint
 from hgm_repro.learner import train, train_group
 from tests.helpers import REPO_ROOT
 from tests.helpers.learner import Recorder, compose_job
@@ -33,9 +33,14 @@ def _weights_digest(network: dict[str, torch.Tensor]) -> str:
     return hashlib.sha256(b"".join(t.numpy().tobytes() for t in network.values())).hexdigest()[:16]
 
 
-def test_a_smoke_training_logs_what_the_solo_loop_logged(tmp_path: Path):
+@pytest.fixture(scope="module")
+def pinned_run(tmp_path_factory) -> tuple[Path, Recorder]:
     log = Recorder()
-    final = train(compose_job("seed=3"), tmp_path, log)
+    return train(compose_job("seed=3"), tmp_path_factory.mktemp("pinned"), log), log
+
+
+def test_a_smoke_training_logs_what_the_solo_loop_logged(pinned_run):
+    final, log = pinned_run
     logged = dict(log.calls)
     assert sorted(logged) == sorted(PINNED)
     for step, values in PINNED.items():
@@ -68,15 +73,10 @@ def test_one_optimiser_and_one_loop_in_the_package(pattern: str):
     assert len(found) == 1, found
 
 
-def test_a_checkpoint_of_an_older_training_identity_is_refused_with_why(tmp_path: Path):
-    job = compose_job("seed=3", "learner.total_steps=64")
-    final = train(job, tmp_path, Recorder())
-    state = torch.load(final, weights_only=False)
+def test_a_checkpoint_of_an_older_training_identity_is_refused_with_why(pinned_run, tmp_path: Path):
+    state = torch.load(pinned_run[0], weights_only=False)
     state["training_config"]["version"] = 2
     state["finished"] = False
     torch.save(state, tmp_path / "last.pt")
-    final.unlink()
-    from hgm_repro.contracts.checkpoint import CheckpointMismatchError
-
     with pytest.raises(CheckpointMismatchError, match="training identity version 2, this code's is 3"):
-        train(job, tmp_path, Recorder())
+        train(compose_job("seed=3"), tmp_path, Recorder())
