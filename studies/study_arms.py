@@ -16,9 +16,23 @@ CAMERA = ["observation.camera_pitch_deg=15", "observation.camera_fov_deg=60", "o
 DQN_FIXES = ["learner.n_step=3", "learner.double_dqn=true", "learner.loss_function=smooth_l1"]
 R20 = [*DQN_FIXES, "eval.val_envs=32"]
 
+# The quick preset's values that the issue-20 preset changed, as they were before: every arm below
+# was defined on them, and states them, so that its meaning does not move with the preset.
+QUICK_BEFORE_R20 = ["learner.lr=0.00025", "learner.adam_eps=1e-08", "learner.eps_floor=0.0",
+                    "learner.eps_floor_steps=0", "learner.random_lane_change_share=0.4", "learner.target_tau=0.0",
+                    "learner.ema_decay=0.0", "eval.val_envs=8"]
+
+
+def on_preset_before_r20(overrides: list[str]) -> list[str]:
+    """`overrides` on top of QUICK_BEFORE_R20 (an arm's own value of a key replaces the old one)."""
+    merged = {o.split("=", 1)[0]: o for o in QUICK_BEFORE_R20}
+    merged.update({o.split("=", 1)[0]: o for o in overrides})
+    return list(merged.values())
+
+
 # Every arm states each learner option it studies, so that its meaning does not move when the
-# preset does (the quick preset adopted DQN_FIXES from this study).
-ARMS: dict[str, list[str]] = {
+# preset does (the quick preset adopted DQN_FIXES from this study, then the r20_all settings).
+_ARMS: dict[str, list[str]] = {
     # The quick preset before the study: the paper's one-step plain DQN with the L2 loss.
     "base": ["learner.n_step=1", "learner.double_dqn=false", "learner.loss_function=l2"],
     "huber_double": ["learner.n_step=1", "learner.loss_function=smooth_l1", "learner.double_dqn=true"],
@@ -107,6 +121,7 @@ ARMS: dict[str, list[str]] = {
     "r20_ahead": R20 + ["observation.hgm_ahead=80"],
     "r20_enriched": R20 + ["observation.hgm=enriched"],
 }
+ARMS: dict[str, list[str]] = {arm: on_preset_before_r20(overrides) for arm, overrides in _ARMS.items()}
 
 
 # The reference hosts the study tests on each tuning seed (no training, the same traffic): the bar

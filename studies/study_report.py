@@ -18,7 +18,7 @@ from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 from study_arms import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
 
-from analysis.stats import mean_ci  # noqa: E402
+from analysis.stats import iqm_ci, mean_ci  # noqa: E402
 from hgm_repro.contracts.names import current_key  # noqa: E402
 from hgm_repro.contracts.train_key import TRAINING_GROUPS  # noqa: E402
 
@@ -100,6 +100,17 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
     return pd.DataFrame(results), pd.DataFrame(curves)
 
 
+def _bar_count(grp: pd.DataFrame, results: pd.DataFrame) -> int:
+    """Seeds on which the arm beats that seed's human-driven host on return with under 0.2 collisions
+    per episode (issue 20's bar); 0 for the reference hosts."""
+    human = results[results["arm"] == "human"].set_index("seed")["episode_return"]
+    if grp["arm"].iloc[0] in STUDY_REFERENCES:
+        return 0
+    wins = [(r.seed in human.index) and r.episode_return > human[r.seed] and r.collisions < 0.2
+            for r in grp.itertuples()]
+    return int(sum(wins))
+
+
 def report(stores: list[Path], out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     results, curves = load(stores)
@@ -115,6 +126,10 @@ def report(stores: list[Path], out: Path) -> None:
             est = mean_ci(grp[m].to_numpy(dtype=float))
             row[m] = est.point
             row[f"{m}_lo"], row[f"{m}_hi"] = est.low, est.high
+        for m in ("episode_return", "collisions"):  # the interquartile mean: robust to one wild seed
+            est = iqm_ci({"seeds": grp[m].to_numpy(dtype=float)})
+            row[f"{m}_iqm"], row[f"{m}_iqm_lo"], row[f"{m}_iqm_hi"] = est.point, est.low, est.high
+        row["seeds_beating_human_under_0.2"] = _bar_count(grp, results)
         rows.append(row)
     order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema")], *STUDY_REFERENCES)
              if a in set(results["arm"])]
