@@ -100,6 +100,12 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
     return pd.DataFrame(results), pd.DataFrame(curves)
 
 
+def _colour(arm: str, curves: pd.DataFrame) -> str:
+    """One colour per arm drawn in this report (arms that share a figure never share a colour)."""
+    drawn = [a for a in ARMS if a in set(curves["arm"])]
+    return f"C{drawn.index(arm) % 10}" if arm in drawn else "grey"
+
+
 def _bar_count(grp: pd.DataFrame, results: pd.DataFrame) -> int:
     """Seeds on which the arm beats that seed's human-driven host on return with under 0.2 collisions
     per episode (issue 20's bar); 0 for the reference hosts."""
@@ -144,7 +150,7 @@ def report(stores: list[Path], out: Path) -> None:
             mean = by_step.mean().rolling(1 if metric.startswith("val/") else 3, min_periods=1).mean()
             seeds = sel[sel["arm"] == arm]["seed"].nunique()
             # One colour per arm in every panel, whichever arms a panel has.
-            ax.plot(mean.index, mean.values, color=f"C{list(ARMS).index(arm) % 10}",
+            ax.plot(mean.index, mean.values, color=_colour(arm, curves),
                     label=f"{arm} ({seeds} seed{'s' if seeds > 1 else ''})")
         ax.set_xlabel("env steps")
         ax.set_title(metric + (" (greedy)" if metric.startswith("val/") else " (epsilon-greedy)"))
@@ -170,11 +176,11 @@ def _validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path
         on_seed = val[val["seed"] == seed]
         for arm in [a for a in ARMS if a in set(on_seed["arm"])]:
             points = on_seed[on_seed["arm"] == arm].sort_values("step")
-            ax.plot(points["step"], points["value"], marker=".", color=f"C{list(ARMS).index(arm) % 10}", label=arm)
+            ax.plot(points["step"], points["value"], marker=".", color=_colour(arm, curves), label=arm)
             averaged = ema[(ema["seed"] == seed) & (ema["arm"] == arm)].sort_values("step")
             if len(averaged):
                 ax.plot(averaged["step"], averaged["value"], marker=".", linestyle="--",
-                        color=f"C{list(ARMS).index(arm) % 10}", label=f"{arm}, moving average")
+                        color=_colour(arm, curves), label=f"{arm}, moving average")
         human = results[(results["arm"] == "human") & (results["seed"] == seed)]["episode_return"]
         if len(human):
             ax.axhline(float(human.iloc[0]), color="black", linestyle="--", linewidth=1,
