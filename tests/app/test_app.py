@@ -23,9 +23,11 @@ def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
     for line in ("experiment: paper, quick, smoke", "launcher: basic, joblib", "learner: dqn",
                  "model: coordinate, human, idm_limits, idm_mobil, idm_mobil_limits, min, proposed, random",
                  "scenario: 1, 2, 3, 4, 5, train",
-                 "simulator: highway", "tracking: sqlite"):
+                 "simulator: highway", "tracking: sqlite", "eval: default", "runtime: default", "logging: default",
+                 "grid: paper, references"):
         assert line in out.stdout
-    for example in ("-m scenario=1,2,3,4,5 model=proposed,min,coordinate", "seed=0,1,2", "experiment=paper",
+    for example in ("-m scenario=1,2,3,4,5 model=proposed,min,coordinate", "-m grid=paper", "seed=0,1",
+                    "experiment=paper",
                     "device=cuda", "tracking.uri=http://", "hydra/launcher=joblib", "mlflow ui"):
         assert example in out.stdout, example
 
