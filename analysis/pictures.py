@@ -61,7 +61,7 @@ def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
     for _ in range(SNAPSHOT_STEPS):
         sim.step(keep)
     frame = builder.frame()
-    return ScenarioPicture(scenario, float(traffic.ratios.get("NCV", 0.0)), _to_hwc(frame["camera"][0, -3:]),
+    return ScenarioPicture(scenario, dict(traffic.ratios).get("NCV", 0.0), _to_hwc(frame["camera"][0, -3:]),
                            _to_hwc(frame["hgm"][0, -3:]))
 
 

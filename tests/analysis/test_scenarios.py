@@ -30,3 +30,11 @@ def test_runs_without_logged_mix_fall_back_to_table_5_and_claims_use_the_logged_
     evals = pd.DataFrame({"model": ["proposed"] * 2, "scenario": ["1", "2"], "episode_return": [1.0, 2.0],
                           "cv_ratio": [0.1, 0.3]})
     assert sorted(_by_cv(evals, "proposed")) == [0.1, 0.3]
+
+
+def test_the_scene_pictures_carry_the_share_of_the_scenario_they_were_drawn_from():
+    from analysis.pictures import scenario_pictures
+
+    pictures, note = scenario_pictures(["1", "3"])
+    assert note is None  # the pictures are skipped with a note on any failure: none here
+    assert [(p.scenario, p.cv_ratio) for p in pictures] == [("1", 0.0), ("3", 0.5)]
