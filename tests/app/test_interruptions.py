@@ -24,7 +24,9 @@ def test_sigusr2_under_submitit_requeues_and_the_requeued_job_resumes(tmp_path: 
     pytest.importorskip("hydra_plugins.hydra_submitit_launcher")
     from hgm_repro.contracts.checkpoint import load_checkpoint
 
-    args = ("-m", *TINY, "learner.total_steps=256", "hydra/launcher=submitit_local",
+    # Long enough that the signal, sent once the first last.pt exists, lands in training on an idle
+    # machine too (at 256 steps the training could end first, and the requeued job had nothing to resume).
+    args = ("-m", *TINY, "learner.total_steps=2048", "hydra/launcher=submitit_local",
             "hydra.launcher.timeout_min=30", "hydra.sweep.dir=sweep")
     sweep = subprocess.Popen(command(*args), cwd=tmp_path, env=environment(), stdout=subprocess.PIPE,
                              stderr=subprocess.STDOUT, text=True, start_new_session=True)
@@ -50,7 +52,7 @@ def test_sigusr2_under_submitit_requeues_and_the_requeued_job_resumes(tmp_path: 
     runs = check_store(tmp_path, {("proposed", "train", "0")}, train_keys=1)
     (train,) = by_stage(runs, "train")
     assert train.info.run_id == run_id and train.data.tags["resumes"] == "1"
-    assert load_checkpoint(id_file.parent / "final.pt")["env_steps"] == 256
+    assert load_checkpoint(id_file.parent / "final.pt")["env_steps"] == 2048
 
 
 def test_four_parallel_jobs_on_one_sqlite_store(tmp_path: Path) -> None:
