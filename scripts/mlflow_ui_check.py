@@ -42,17 +42,32 @@ def chromium() -> str | None:
     return shutil.which("chromium") or shutil.which("chromium-browser") or shutil.which("google-chrome")
 
 
-def _free_port() -> int:
+def free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def wait_healthy(url: str, server: subprocess.Popen, timeout: float, poll_s: float = 0.5) -> bool:
+    """True once an MLflow server at `url` answers /health; False if it exited or `timeout` s passed."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(f"{url}/health", timeout=5) as answer:
+                if answer.status == 200:
+                    return True
+        except OSError:
+            pass
+        if server.poll() is not None or time.monotonic() > deadline:
+            return False
+        time.sleep(poll_s)
 
 
 @contextmanager
 def served(launch_dir: Path, timeout: float = 90.0) -> Iterator[str]:
     """`mlflow ui` on the launch directory's store, on a free port; yields its base address."""
     launch_dir = Path(launch_dir).resolve()
-    port = _free_port()
+    port = free_port()
     command = [sys.executable, "-m", "mlflow", "ui", "--port", str(port), "--host", "127.0.0.1",
                "--backend-store-uri", f"sqlite:///{launch_dir / 'mlflow.db'}",
                "--default-artifact-root", (launch_dir / "mlartifacts").as_uri()]
@@ -60,18 +75,9 @@ def served(launch_dir: Path, timeout: float = 90.0) -> Iterator[str]:
     server = subprocess.Popen(command, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
     base = f"http://127.0.0.1:{port}"
     try:
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                with urllib.request.urlopen(f"{base}/health", timeout=2) as answer:
-                    if answer.status == 200:
-                        break
-            except OSError:
-                pass
-            if server.poll() is not None or time.monotonic() > deadline:
-                log.seek(0)
-                raise RuntimeError(f"mlflow ui did not start: {log.read().decode()[-2000:]}")
-            time.sleep(0.5)
+        if not wait_healthy(base, server, timeout):
+            log.seek(0)
+            raise RuntimeError(f"mlflow ui did not start: {log.read().decode()[-2000:]}")
         yield base
     finally:
         server.terminate()

@@ -33,7 +33,7 @@ from ..contracts.checkpoint import (
     weights_file,
 )
 from ..contracts.errors import BAD_INPUT_EXIT, ConfigError
-from ..contracts.interrupts import JobInterrupted, hand_on, raise_if_pending, signals_raise
+from ..contracts.interrupts import JobInterrupted, acquire_stoppably, hand_on, signals_raise
 from ..contracts.names import VALIDATION_RETURN
 from ..contracts.schema import JobConfig, validate
 from ..contracts.simulator_config import ScenarioConfig
@@ -178,12 +178,7 @@ def obtain_checkpoint(
         lock.acquire(timeout=0)
     except Timeout:
         log.info("train_key=%s is being trained by another job: waiting for it", key)
-        while True:  # in slices, so that a stop signal while waiting still stops the job
-            try:
-                lock.acquire(timeout=1.0)
-                break
-            except Timeout:
-                raise_if_pending()
+        acquire_stoppably(lock, 1.0)
     try:
         unfinished = _unfinished_training(tracker, checkpoint_dir)
         if unfinished is None:

@@ -29,7 +29,7 @@ from filelock import FileLock, Timeout
 from omegaconf import DictConfig
 
 from ..contracts.config_tree import flatten as flatten_tree
-from ..contracts.interrupts import protected, raise_if_pending
+from ..contracts.interrupts import acquire_stoppably, protected
 from .provenance import source_tags
 
 log = logging.getLogger(__name__)
@@ -284,12 +284,7 @@ class Tracker:
         if run_id in self._held:
             return
         lock = self._run_lock(run_id)
-        while True:  # in slices, so that a stop signal while waiting still stops the job
-            try:
-                lock.acquire(timeout=0.5)
-                break
-            except Timeout:
-                raise_if_pending()
+        acquire_stoppably(lock, 0.5)
         self._held[run_id] = lock
 
     def set_tags(self, run_id: str, tags: Mapping[str, Any]) -> None:

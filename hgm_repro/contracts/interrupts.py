@@ -24,6 +24,8 @@ from contextlib import contextmanager
 from types import FrameType
 from typing import Any, NoReturn
 
+from filelock import Timeout
+
 STOP_SIGNALS = (signal.SIGTERM, signal.SIGINT, signal.SIGUSR2)
 
 
@@ -56,6 +58,17 @@ def raise_if_pending() -> None:
     if _pending is not None and _depth == 0:
         signum, _pending = _pending, None
         raise JobInterrupted(signum)
+
+
+def acquire_stoppably(lock: Any, slice_s: float) -> None:
+    """Acquire a `filelock` lock, waiting in slices of `slice_s` so that a stop signal that arrives
+    while another process holds it still stops the job."""
+    while True:
+        try:
+            lock.acquire(timeout=slice_s)
+            return
+        except Timeout:
+            raise_if_pending()
 
 
 @contextmanager

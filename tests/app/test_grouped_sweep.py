@@ -30,13 +30,8 @@ def _check_grouped(launch: Path) -> None:
     assert len({r.data.tags["train_key"] for r in trainings}) == 6
 
 
-def test_grouped_grid_leaves_the_store_a_solo_grid_would(tmp_path: Path) -> None:
-    out = hgm(tmp_path, *GRID)
-    assert "training the seeds of each model together" in out.stdout + out.stderr
-    _check_grouped(tmp_path)
-
-
-def test_grouped_grid_killed_mid_training_then_rerun(tmp_path: Path) -> None:
+def _grid_until_a_checkpoint(tmp_path: Path) -> tuple[subprocess.Popen, Path]:
+    """The grouped grid started in its own process group, returned once a member wrote last.pt."""
     log = tmp_path / "first.log"
     sweep = subprocess.Popen(command(*GRID), cwd=tmp_path, env=environment(), stdout=log.open("w"),
                              stderr=subprocess.STDOUT, start_new_session=True)
@@ -44,6 +39,17 @@ def test_grouped_grid_killed_mid_training_then_rerun(tmp_path: Path) -> None:
     while not list((tmp_path / "checkpoints").glob("*/last.pt")) and time.monotonic() < deadline:
         time.sleep(0.2)
         assert sweep.poll() is None, log.read_text()[-3000:]
+    return sweep, log
+
+
+def test_grouped_grid_leaves_the_store_a_solo_grid_would(tmp_path: Path) -> None:
+    out = hgm(tmp_path, *GRID)
+    assert "training the seeds of each model together" in out.stdout + out.stderr
+    _check_grouped(tmp_path)
+
+
+def test_grouped_grid_killed_mid_training_then_rerun(tmp_path: Path) -> None:
+    sweep, _ = _grid_until_a_checkpoint(tmp_path)
     os.killpg(sweep.pid, signal.SIGKILL)
     sweep.wait()
     assert not [r for r in by_stage(store_runs(tmp_path), "eval")]  # killed before any job
@@ -54,13 +60,7 @@ def test_grouped_grid_killed_mid_training_then_rerun(tmp_path: Path) -> None:
 def test_grouped_grid_stopped_by_sigterm_checkpoints_every_member_then_resumes(tmp_path: Path) -> None:
     from hgm_repro.contracts.checkpoint import load_checkpoint
 
-    log = tmp_path / "first.log"
-    sweep = subprocess.Popen(command(*GRID), cwd=tmp_path, env=environment(), stdout=log.open("w"),
-                             stderr=subprocess.STDOUT, start_new_session=True)
-    deadline = time.monotonic() + 600
-    while not list((tmp_path / "checkpoints").glob("*/last.pt")) and time.monotonic() < deadline:
-        time.sleep(0.2)
-        assert sweep.poll() is None, log.read_text()[-3000:]
+    sweep, log = _grid_until_a_checkpoint(tmp_path)
     os.killpg(sweep.pid, signal.SIGTERM)
     assert sweep.wait(timeout=300) != 0
     stopped = [r for r in by_stage(store_runs(tmp_path), "train") if r.info.status != "FINISHED"]

@@ -7,23 +7,20 @@ import glob
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
-import time
-import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
 
+from tests.helpers import ui_check_script
+
 
 def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return ui_check_script().free_port()
 
 
 def postgres_bin(name: str) -> str:
@@ -73,18 +70,10 @@ def mlflow_server_on(postgres: str, tmp_path: Path) -> Iterator[str]:
     )
     url = f"http://127.0.0.1:{port}"
     try:
-        deadline = time.monotonic() + 180  # first start creates the schema in PostgreSQL
-        while True:
-            try:
-                with urllib.request.urlopen(f"{url}/health", timeout=5) as answer:
-                    if answer.status == 200:
-                        break
-            except OSError:
-                pass
-            if server.poll() is not None or time.monotonic() > deadline:
-                log.flush()
-                pytest.fail("MLflow server did not start:\n" + (tmp_path / "mlflow_server.log").read_text()[-3000:])
-            time.sleep(1)
+        # The first start creates the schema in PostgreSQL: up to 3 minutes.
+        if not ui_check_script().wait_healthy(url, server, timeout=180, poll_s=1):
+            log.flush()
+            pytest.fail("MLflow server did not start:\n" + (tmp_path / "mlflow_server.log").read_text()[-3000:])
         yield url
     finally:
         stop_group(server)

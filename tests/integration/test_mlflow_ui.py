@@ -4,7 +4,6 @@ by scripts/mlflow_ui_check.py (integration: needs Debian's chromium)."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
@@ -20,14 +19,7 @@ from hgm_repro.app.store import (
     resolve_location,
 )
 from hgm_repro.app.sweep import _sweep_time
-from tests.helpers import REPO_ROOT
-
-
-def _check_script():
-    spec = importlib.util.spec_from_file_location("mlflow_ui_check", REPO_ROOT / "scripts" / "mlflow_ui_check.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+from tests.helpers import ui_check_script
 
 
 def _location(launch: Path) -> StoreLocation:
@@ -95,7 +87,7 @@ def test_sweep_runs_are_named_with_date_and_time() -> None:
 
 @pytest.mark.integration
 def test_a_browser_sees_every_evaluation_as_a_row_and_charts_open_on_training(tmp_path: Path) -> None:
-    check = _check_script()
+    check = ui_check_script()
     if check.chromium() is None:
         pytest.skip("needs chromium (Debian: apt-get install chromium)")
     make_store(tmp_path)
@@ -108,5 +100,5 @@ def test_the_table_parser_reads_cells_by_row_and_column() -> None:
     dom = ('<div class="ag-row x" row-id="r1"><div class="ag-cell" col-id="tags.`model`"><span>min</span></div>'
            '<div class="ag-cell" col-id="metrics.`eval/collisions`">0.5</div></div>'
            '<div class="ag-row" row-id="r1"><div class="ag-cell" col-id="tags.`seed`">1<br></div></div>')
-    assert _check_script().table_rows(dom) == {"r1": {"tags.`model`": "min", "metrics.`eval/collisions`": "0.5",
+    assert ui_check_script().table_rows(dom) == {"r1": {"tags.`model`": "min", "metrics.`eval/collisions`": "0.5",
                                                       "tags.`seed`": "1"}}
