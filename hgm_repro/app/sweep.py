@@ -126,7 +126,7 @@ class SweepTracking(Callback):
         so (`hgm_repro.learner.grouped`); the jobs then find them FINISHED and only evaluate."""
         task = [str(o) for o in OmegaConf.to_container(config.hydra.overrides.task, resolve=False)]
         # Expanding the sweep costs a compose per job: only when a job may group.
-        deciders = ("runtime.grouped", "device", "learner", "experiment")
+        deciders = ("runtime.grouped", "runtime", "device", "experiment")
         swept = any(o.split("=", 1)[0].lstrip("+~") in deciders for o in task)
         try:
             if not swept and not use_grouped(config.runtime.grouped, str(config.device)):

@@ -52,13 +52,16 @@ def _root(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str, Any]:
 
 def train_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     """A short hex digest of `training_config(cfg)`; stable across runs and machines."""
-    payload = json.dumps(training_config(cfg), sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(payload.encode()).hexdigest()[:KEY_LENGTH]
+    return _digest(training_config(cfg))
+
+
+def _digest(payload: Mapping[str, Any]) -> str:
+    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
 
 
 # Root groups that say where results go, how a job runs (the device aside: its numbers may differ),
-# or whether to train again, not what an
-# evaluation measures.
+# or whether to train again, not what an evaluation measures.
 NON_EVALUATION_GROUPS = frozenset({"tracking", "force_retrain", "hydra", "runtime", "logging"})
 
 
@@ -68,6 +71,4 @@ def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     With the training run it evaluates, it names one evaluation: a job whose evaluation already
     FINISHED (a sweep run again after a crash, a requeued job) does not evaluate again.
     """
-    payload = {k: v for k, v in _root(cfg).items() if k not in NON_EVALUATION_GROUPS}
-    text = json.dumps(payload, sort_keys=True, separators=(",", ":"), default=str)
-    return hashlib.sha256(text.encode()).hexdigest()[:KEY_LENGTH]
+    return _digest({k: v for k, v in _root(cfg).items() if k not in NON_EVALUATION_GROUPS})

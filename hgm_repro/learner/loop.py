@@ -89,8 +89,8 @@ class MemberPolicies(TensorDictModuleBase):
 
     def forward(self, td: TensorDictBase) -> TensorDictBase:
         n = self.member_envs
-        outs = [policy(td[k * n:(k + 1) * n].copy()) for k, policy in enumerate(self.policies)]
-        td.update(torch.cat(outs, 0).select(*self.out_keys))
+        outs = [policy(td[k * n:(k + 1) * n].copy()).select(*self.out_keys) for k, policy in enumerate(self.policies)]
+        td.update(torch.cat(outs, 0))  # only what the policies wrote: the observations stay where they are
         return td
 
 
