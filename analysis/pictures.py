@@ -35,27 +35,17 @@ def _to_hwc(img: Any) -> np.ndarray:
     return arr.astype(np.uint8)
 
 
-def _observation_settings() -> dict[str, Any]:
-    import yaml
-
-    from hgm_repro.contracts.config_files import CONF_DIR
-
-    return dict(yaml.safe_load((Path(CONF_DIR) / "config.yaml").read_text()).get("observation", {}))
-
-
 def _from_interfaces(scenario: str, seed: int) -> ScenarioPicture:
     import torch
 
-    from hgm_repro.contracts.config_files import scenario_config, simulator_config
-    from hgm_repro.observations import ObservationBuilder, ObservationConfig
+    from hgm_repro.contracts.config_files import observation_config, scenario_config, simulator_config
+    from hgm_repro.observations import ObservationBuilder
     from hgm_repro.simulator import Action, HighwaySimulator
 
     sim_cfg = simulator_config()
     traffic = scenario_config(scenario, sim_cfg)
     sim = HighwaySimulator(sim_cfg, traffic, n_envs=1, seed=seed)
-    settings = _observation_settings()
-    settings.update(camera="front", hgm="paper", coordinates=False, frame_stack=1)
-    builder = ObservationBuilder(sim, ObservationConfig(**settings))
+    builder = ObservationBuilder(sim, observation_config("proposed", frame_stack=1))
     builder.reset(None)
     keep = torch.full((1,), int(Action.NO_ACTION), dtype=torch.long)
     for _ in range(SNAPSHOT_STEPS):

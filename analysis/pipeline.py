@@ -46,7 +46,7 @@ def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFram
             source = "from the logged params of the runs"
     if not flat:
         try:
-            from hgm_repro.contracts.config_files import CONF_DIR
+            from hgm_repro.contracts.conf_dir import CONF_DIR
 
             flat = flatten(yaml.safe_load((Path(CONF_DIR) / "simulator" / "highway.yaml").read_text()))
             source = "from conf/simulator/highway.yaml: the runs did not log them"

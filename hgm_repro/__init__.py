@@ -4,7 +4,7 @@ Importing the package registers `hgm_repro/HeterogeneousHighway-v0` with Gymnasi
 `import highway_env` does for its envs); it loads neither torch nor the simulator.
 """
 
-from .contracts.config_files import CONF_DIR, PACKAGE_ROOT, find_conf_dir
+from .contracts.conf_dir import CONF_DIR, PACKAGE_ROOT, find_conf_dir
 from .envs.registration import register_envs
 
 __version__ = "0.1.0"

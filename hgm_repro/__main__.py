@@ -18,7 +18,7 @@ from typing import Any
 import hydra
 from omegaconf import DictConfig
 
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.errors import BAD_INPUT_EXIT
 
 _GROUP_OVERRIDE = re.compile(r"^(?P<key>[~+]?(?P<group>[A-Za-z_][\w/]*)(@[\w.]+)?)=(?P<value>[\d.]+(,[\d.]+)*)$")

@@ -24,7 +24,7 @@ from typing import Any
 
 import torch
 
-from .contracts.config_files import scenario_config, simulator_config
+from .contracts.config_files import observation_config, scenario_config, simulator_config
 from .simulator import HOST, HighwaySimulator
 
 OBS_VARIANTS = {  # name -> the model streams it stands for
@@ -79,10 +79,10 @@ def bench_simulator(n_envs: int, device: torch.device, seconds: float) -> dict[s
 
 def bench_observations(variant: str, n_envs: int, device: torch.device, seconds: float,
                        size: int = 84, frame_stack: int = 4) -> dict[str, Any]:
-    from .observations import ObservationBuilder, ObservationConfig
+    from .observations import ObservationBuilder
 
     streams = OBS_VARIANTS[variant]
-    obs_cfg = ObservationConfig.from_config(dict(height=size, width=size, frame_stack=frame_stack), streams)
+    obs_cfg = observation_config(streams, height=size, width=size, frame_stack=frame_stack)
     sim = _simulator(n_envs, device)
     builder = ObservationBuilder(sim, obs_cfg)
     builder.reset()
@@ -109,10 +109,10 @@ def bench_observations_under_resets(variant: str, n_envs: int, device: torch.dev
     does. `observation_env_steps_per_s` counts only the builders' time; `reset_cost_vs_step` is the
     time spent refilling the reset envs' stacks over the time of pushing one frame for all envs (a
     ratio taken within the run, so that it holds on a busy machine)."""
-    from .observations import ObservationBuilder, ObservationConfig
+    from .observations import ObservationBuilder
 
     streams = OBS_VARIANTS[variant]
-    obs_cfg = ObservationConfig.from_config(dict(height=size, width=size, frame_stack=frame_stack), streams)
+    obs_cfg = observation_config(streams, height=size, width=size, frame_stack=frame_stack)
     sim = _simulator(n_envs, device)
     builder = ObservationBuilder(sim, obs_cfg)
     builder.reset()
@@ -192,7 +192,7 @@ def _compose(*overrides: str) -> Any:
     """The validated `JobConfig` of the root config plus `overrides`."""
     from hydra import compose, initialize_config_dir
 
-    from .contracts.config_files import CONF_DIR
+    from .contracts.conf_dir import CONF_DIR
     from .contracts.schema import validate
 
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):

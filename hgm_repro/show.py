@@ -87,18 +87,15 @@ def still(args: dict[str, str]) -> Path:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from omegaconf import OmegaConf
 
-    from hgm_repro.contracts.config_files import CONF_DIR, scenario_config, simulator_config
+    from hgm_repro.contracts.config_files import observation_config, scenario_config, simulator_config
     from hgm_repro.envs.render import hgm_colour_limit, render_top_down
-    from hgm_repro.observations import ObservationBuilder, ObservationConfig, decode_hgm, hyper_grid_matrix
+    from hgm_repro.observations import ObservationBuilder, decode_hgm, hyper_grid_matrix
     from hgm_repro.simulator import HOST, HighwaySimulator
 
     env, steps = int(args["env"]), int(args["steps"] or STILL_STEPS)
-    root = OmegaConf.load(CONF_DIR / "config.yaml")
-    obs_node = {**OmegaConf.to_container(root.observation), "height": int(args["height"]),
-                "width": int(args["width"])}
-    obs_cfg = ObservationConfig.from_config(obs_node, {"camera": args["camera"], "hgm": args["hgm"]})
+    obs_cfg = observation_config({"camera": args["camera"], "hgm": args["hgm"], "coordinates": False},
+                                 height=int(args["height"]), width=int(args["width"]))
     sim_cfg = simulator_config(host_safety_layer=True)  # the host drives by the NPC rule, under its safety layer
     sim = HighwaySimulator(sim_cfg, scenario_config(args["scenario"], sim_cfg), n_envs=env + 1,
                            seed=int(args["seed"]))
@@ -204,7 +201,7 @@ def watch(args: dict[str, str]) -> Path:
 def _scenario_node(name: str) -> Any:
     from omegaconf import OmegaConf
 
-    from hgm_repro.contracts.config_files import CONF_DIR
+    from hgm_repro.contracts.conf_dir import CONF_DIR
 
     path = CONF_DIR / "scenario" / f"{name}.yaml"
     if not path.is_file():
@@ -254,7 +251,7 @@ def _from_checkpoint(path: Path, model: str) -> Any:
     from omegaconf import OmegaConf, open_dict
 
     from hgm_repro.contracts.checkpoint import CheckpointMismatchError, load_checkpoint
-    from hgm_repro.contracts.config_files import CONF_DIR
+    from hgm_repro.contracts.conf_dir import CONF_DIR
 
     if not path.is_file():
         raise WatchError(f"no checkpoint at {path}")

@@ -14,7 +14,7 @@ import json
 import torch
 from hydra import compose, initialize_config_dir
 
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.schema import validate
 from hgm_repro.envs import make_env
 from hgm_repro.learner.builders import make_replay_buffer

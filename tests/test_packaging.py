@@ -9,7 +9,7 @@ import yaml
 
 import hgm_repro
 from hgm_repro import __main__ as cli
-from hgm_repro.contracts.config_files import find_conf_dir
+from hgm_repro.contracts.conf_dir import find_conf_dir
 from tests.helpers import REPO_ROOT
 
 

@@ -9,7 +9,7 @@ import subprocess
 from functools import lru_cache
 from pathlib import Path
 
-from ..contracts.config_files import PACKAGE_ROOT
+from ..contracts.conf_dir import PACKAGE_ROOT
 
 SOURCE_NAME = "python -m hgm_repro"
 

@@ -11,36 +11,23 @@ from collections.abc import Mapping
 from dataclasses import dataclass, fields
 from typing import Any
 
+from .config_tree import plain
 from .simulator_config import finite_number
+from .table3 import MIN_IMAGE_SIDE, PAPER_CONV, conv_stack_output
 
 CAMERAS = ("front", "birdseye", "none")
 HGM_VARIANTS = ("paper", "enriched", "none")
 HGM_HOST_CELLS = ("paper", "own_range")
-
-# The smallest image the paper's conv stack (8x8/4, 4x4/2, 3x3/1, no padding) accepts:
-# 36 -> 8 -> 3 -> 1.
-MIN_IMAGE_SIDE = 36
+# The model's `streams` node: which observations its network reads.
+STREAM_KEYS = ("camera", "hgm", "coordinates")
 
 
-def conv_stack_output(side: int) -> int:
-    """Spatial size after the paper's conv stack (Table 3), to explain a too-small image."""
-    for kernel, stride in ((8, 4), (4, 2), (3, 1)):
-        side = (side - kernel) // stride + 1
-    return side
-
-
-def _plain(node: Any) -> dict[str, Any]:
+def _mapping(node: Any, what: str) -> dict[str, Any]:
+    node = plain(node)
     if node is None:
         return {}
-    try:
-        from omegaconf import DictConfig, OmegaConf
-
-        if isinstance(node, DictConfig):
-            return dict(OmegaConf.to_container(node, resolve=True))
-    except ImportError:  # pragma: no cover
-        pass
     if not isinstance(node, Mapping):
-        raise ValueError(f"expected a mapping for the observation config, got {type(node).__name__}: {node!r}")
+        raise ValueError(f"expected a mapping for {what}, got {type(node).__name__}: {node!r}")
     return dict(node)
 
 
@@ -54,21 +41,24 @@ def _positive_int(name: str, value: Any) -> int:
 class ObservationConfig:
     """Which observation streams to build and how (see docs/interfaces.md)."""
 
-    camera: str = "front"  # front | birdseye | none
-    hgm: str = "paper"  # paper | enriched | none
-    coordinates: bool = False  # the Coordinate method's raw V2X vector
-    height: int = 84  # camera and HGM share height and width (one shared conv stack)
-    width: int = 84
-    frame_stack: int = 4
-    v2x_range: float = 40.0  # D_r, m (Algorithm 1)
-    hgm_ahead: float = 0.0  # m the HGM reaches ahead of the host (0: D_r, the paper's symmetric window)
-    hgm_host_cell: str = "paper"  # paper | own_range (see hyper_grid_matrix.host_cell_values)
-    coord_k: int = 16  # K nearest connected vehicles in the coordinate vector
-    camera_fov_deg: float = 90.0  # horizontal field of view
-    camera_height: float = 1.2  # m above the road
-    camera_pitch_deg: float = 0.0  # downward aim (shifted-lens model: the horizon moves up)
-    vehicle_height: float = 1.5  # m; every vehicle's box height in the camera
-    camera_max_range: float = 150.0  # m; vehicles farther ahead are not drawn
+    # No defaults here: the one place of each value is the root config's `observation` node
+    # (conf/config.yaml) and the model's `streams` node; `config_files.observation_config` builds
+    # one from them for code that runs without Hydra.
+    camera: str  # front | birdseye | none
+    hgm: str  # paper | enriched | none
+    coordinates: bool  # the Coordinate method's raw V2X vector
+    height: int  # camera and HGM share height and width (one shared conv stack)
+    width: int
+    frame_stack: int
+    v2x_range: float  # D_r, m (Algorithm 1)
+    hgm_ahead: float  # m the HGM reaches ahead of the host (0: D_r, the paper's symmetric window)
+    hgm_host_cell: str  # paper | own_range (see hyper_grid_matrix.host_cell_values)
+    coord_k: int  # K nearest connected vehicles in the coordinate vector
+    camera_fov_deg: float  # horizontal field of view
+    camera_height: float  # m above the road
+    camera_pitch_deg: float  # downward aim (shifted-lens model: the horizon moves up)
+    vehicle_height: float  # m; every vehicle's box height in the camera
+    camera_max_range: float  # m; vehicles farther ahead are not drawn
 
     def __post_init__(self) -> None:
         self.validate()
@@ -84,7 +74,8 @@ class ObservationConfig:
             side = _positive_int(name, getattr(self, name))
             if side < MIN_IMAGE_SIDE:
                 raise ValueError(
-                    f"observation.{name}={side} is not allowed: the conv stack 8/4, 4/2, 3/1 needs at least "
+                    f"observation.{name}={side} is not allowed: Table 3's conv stack (kernel/stride "
+                    f"{', '.join(f'{k}/{st}' for _f, k, st in PAPER_CONV)}) needs at least "
                     f"{MIN_IMAGE_SIDE} pixels (it would output {conv_stack_output(side)})")
         if _positive_int("frame_stack", self.frame_stack) < 1:
             raise ValueError(f"observation.frame_stack={self.frame_stack} is not allowed: need >= 1")
@@ -132,21 +123,30 @@ class ObservationConfig:
     def from_config(cls, observation_node: Any, streams_node: Any = None) -> ObservationConfig:
         """From the root config's `observation` node and the model's `streams` node
         (plain dicts or OmegaConf DictConfigs)."""
-        obs = _plain(observation_node)
-        streams = _plain(streams_node)
-        allowed_obs = {f.name for f in fields(cls)} - {"camera", "hgm", "coordinates"}
-        unknown = set(obs) - allowed_obs - {"camera", "hgm", "coordinates"}
+        obs = _mapping(observation_node, "observation")
+        streams = _mapping(streams_node, "model.streams")
+        stream_keys = set(STREAM_KEYS)
+        allowed_obs = {f.name for f in fields(cls)} - stream_keys
+        unknown = set(obs) - allowed_obs - stream_keys
         if unknown:
             raise ValueError(f"observation has unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed_obs)}")
-        unknown = set(streams) - {"camera", "hgm", "coordinates"}
+        unknown = set(streams) - stream_keys
         if unknown:
             raise ValueError(f"model.streams has unknown field(s) {sorted(unknown)}; "
                              "allowed: ['camera', 'coordinates', 'hgm']")
         merged = {**obs, **streams}
+        missing = allowed_obs - set(obs)
+        if missing:
+            raise ValueError(f"observation misses field(s) {sorted(missing)}: give the whole node "
+                             "(conf/config.yaml's `observation`; config_files.observation_config fills it)")
+        missing = stream_keys - set(merged)
+        if missing:
+            raise ValueError(f"model.streams misses field(s) {sorted(missing)}: every model names its streams "
+                             "(camera, hgm, coordinates)")
         # YAML may spell "no stream" as null or false.
         for key in ("camera", "hgm"):
-            if key in merged and merged[key] in (None, False):
+            if merged[key] in (None, False):
                 merged[key] = "none"
-        if "coordinates" in merged and merged["coordinates"] is None:
+        if merged["coordinates"] is None:
             merged["coordinates"] = False
         return cls(**merged)

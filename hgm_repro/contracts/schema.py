@@ -18,9 +18,10 @@ from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from typing import Any, Literal
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
 from .config_files import scenario_config, simulator_config
+from .config_tree import plain
 from .errors import ConfigError
 from .observation_config import ObservationConfig
 from .simulator_config import ScenarioConfig, SimulatorConfig
@@ -301,7 +302,7 @@ def _check_tracking_uri(tracking: Any, errors: list[str]) -> None:
 
 def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     """Check the whole job config; raise `ConfigError` listing every bad value."""
-    root = OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+    root = dict(plain(cfg))
     errors: list[str] = []
     parts = {
         "learner": check_node(LearnerSchema, root.get("learner"), "learner", errors),

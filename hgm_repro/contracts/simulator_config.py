@@ -8,7 +8,7 @@ and what is allowed.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from .errors import ConfigError, finite_number
@@ -32,9 +32,9 @@ class VehicleType:
     r_lon: float  # probability of a random longitudinal action per decision
     r_lat: float  # probability of a random lane change per decision
     connected: bool  # sends V2X data (appears in the HGM and the coordinate vector)
-    length: float = 4.5
-    width: float = 1.8
-    lane_change_time_gap: float = 1.5
+    length: float  # m
+    width: float  # m
+    lane_change_time_gap: float  # s: the smallest time gap it accepts in the target lane
 
     @classmethod
     def from_mapping(cls, name: str, raw: Mapping[str, Any]) -> VehicleType:
@@ -42,7 +42,7 @@ class VehicleType:
         allowed = {f for f in cls.__dataclass_fields__ if f != "name"}
         unknown = set(raw) - allowed
         _require(not unknown, f"{where} has unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
-        missing = {"a_lon", "v_lat", "r_lon", "r_lat", "connected"} - set(raw)
+        missing = allowed - set(raw)
         _require(not missing, f"{where} misses field(s) {sorted(missing)}")
         values = {k: (bool(v) if k == "connected" else finite_number(f"{where}.{k}", v)) for k, v in raw.items()}
         vt = cls(name=name, **values)
@@ -58,42 +58,46 @@ class VehicleType:
 
 @dataclass(frozen=True)
 class SafetyConfig:
-    reaction_time: float = 1.0
-    emergency_decel: float = 6.0
-    min_gap: float = 2.0
+    """The other vehicles' safe-speed rule (paper silent)."""
+
+    reaction_time: float  # s
+    emergency_decel: float  # m/s^2
+    min_gap: float  # m bumper to bumper at standstill
 
 
 @dataclass(frozen=True)
 class RewardConfig:
     """Table 2's reward values and the thresholds Algorithm 2 leaves open."""
 
-    collision: float = -20.0
-    dangerous: float = -2.0
-    lane_change: float = -1.0
-    overtake: float = 5.0
-    dangerous_time_gap: float = 1.0
-    overtake_per_vehicle: bool = False
+    collision: float
+    dangerous: float
+    lane_change: float
+    overtake: float
+    dangerous_time_gap: float  # s
+    overtake_per_vehicle: bool
 
 
 @dataclass(frozen=True)
 class SimulatorConfig:
-    lanes: int = 5
-    lane_width: float = 3.5
-    v_min_kmh: float = 40.0
-    v_max_kmh: float = 80.0
-    decision_dt: float = 0.5
-    physics_dt: float = 0.1
-    episode_seconds: float = 120.0
-    window_behind: float = 150.0
-    window_ahead: float = 250.0
-    density_per_km_per_lane: float = 30.0
-    host_start_lane: int = 2
-    host_start_speed_kmh: float = 60.0
-    host_safety_layer: bool = False
-    vehicle_types: tuple[VehicleType, ...] = ()
-    safety: SafetyConfig = field(default_factory=SafetyConfig)
-    reward: RewardConfig = field(default_factory=RewardConfig)
-    name: str = "highway"
+    """The highway (conf/simulator/highway.yaml: the one place of every value and its meaning)."""
+
+    lanes: int
+    lane_width: float
+    v_min_kmh: float
+    v_max_kmh: float
+    decision_dt: float
+    physics_dt: float
+    episode_seconds: float
+    window_behind: float
+    window_ahead: float
+    density_per_km_per_lane: float
+    host_start_lane: int
+    host_start_speed_kmh: float
+    host_safety_layer: bool
+    vehicle_types: tuple[VehicleType, ...]
+    safety: SafetyConfig
+    reward: RewardConfig
+    name: str
 
     # Derived quantities, in SI units.
     @property
@@ -136,17 +140,22 @@ class SimulatorConfig:
         allowed = set(cls.__dataclass_fields__)
         unknown = set(raw) - allowed
         _require(not unknown, f"simulator has unknown field(s) {sorted(unknown)}; allowed: {sorted(allowed)}")
+        missing = allowed - set(raw)
+        _require(not missing, f"simulator misses field(s) {sorted(missing)}: give the whole node "
+                              "(conf/simulator/highway.yaml; config_files.simulator_config starts from it)")
         types_raw = raw.pop("vehicle_types", None)
         _require(bool(types_raw), "simulator.vehicle_types is empty: at least the host type 'HV' is needed")
         _require(HOST_TYPE in types_raw, f"simulator.vehicle_types lacks the host type {HOST_TYPE!r}")
         # The host's type comes first so that type index 0 always means the host.
         names = [HOST_TYPE] + [n for n in types_raw if n != HOST_TYPE]
         types = tuple(VehicleType.from_mapping(str(n), types_raw[n]) for n in names)
-        safety_raw, reward_raw = dict(raw.pop("safety", {}) or {}), dict(raw.pop("reward", {}) or {})
+        safety_raw, reward_raw = dict(raw.pop("safety") or {}), dict(raw.pop("reward") or {})
         for group, sub, klass in (("safety", safety_raw, SafetyConfig), ("reward", reward_raw, RewardConfig)):
             unknown = set(sub) - set(klass.__dataclass_fields__)
             _require(not unknown, f"simulator.{group} has unknown field(s) {sorted(unknown)}; "
                                   f"allowed: {sorted(klass.__dataclass_fields__)}")
+            missing = set(klass.__dataclass_fields__) - set(sub)
+            _require(not missing, f"simulator.{group} misses field(s) {sorted(missing)}")
         safety = SafetyConfig(**{k: finite_number(f"simulator.safety.{k}", v) for k, v in safety_raw.items()})
         reward = RewardConfig(**{
             k: (bool(v) if k == "overtake_per_vehicle" else finite_number(f"simulator.reward.{k}", v))

@@ -15,8 +15,9 @@ import json
 from collections.abc import Mapping
 from typing import Any
 
-from omegaconf import DictConfig, OmegaConf
+from omegaconf import DictConfig
 
+from .config_tree import plain
 from .schema import JobConfig
 
 # Bump when the checkpoint format or the meaning of a training config changes, so that
@@ -47,7 +48,7 @@ def training_config(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str
 def _root(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> dict[str, Any]:
     if isinstance(cfg, JobConfig):
         return cfg.resolved
-    return OmegaConf.to_container(cfg, resolve=True) if isinstance(cfg, DictConfig) else dict(cfg)
+    return dict(plain(cfg))
 
 
 def train_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:

@@ -17,10 +17,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import torch
-import yaml
 
-from ..contracts.config_files import CONF_DIR, load_yaml
-from ..observations import ObservationBuilder, ObservationConfig
+from ..contracts.config_files import observation_config
+from ..observations import ObservationBuilder
 from ..simulator.highway import HighwaySimulator
 from ..simulator.state import HOST
 
@@ -30,11 +29,6 @@ _STREAMS_OF = {"hgm": "proposed", "camera": "min", "coordinates": "coordinate"}
 KINEMATICS_FEATURES = ("present", "rel_lon", "rel_lat", "rel_speed", "lane")
 
 Observation = torch.Tensor | dict[str, torch.Tensor]
-
-
-def _default_observation_params() -> dict[str, Any]:
-    # The root config's `observation` node (plain YAML; Hydra is not needed to read it).
-    return dict(yaml.safe_load((CONF_DIR / "config.yaml").read_text())["observation"])
 
 
 @torch.no_grad()
@@ -102,9 +96,7 @@ class GymObservations:
                                                  for k, (shape, dtype) in self.builder.specs().items()})
 
     def _make_builder(self, observation: str, overrides: Mapping[str, Any] | None) -> ObservationBuilder:
-        params = {**_default_observation_params(), **dict(overrides or {})}
-        streams = load_yaml("model", _STREAMS_OF[observation])["streams"]
-        return ObservationBuilder(self.sim, ObservationConfig.from_config(params, streams))
+        return ObservationBuilder(self.sim, observation_config(_STREAMS_OF[observation], **dict(overrides or {})))
 
     def reset(self, mask: torch.Tensor | None = None) -> Observation:
         """After `sim.reset(mask)`: the envs in `mask` (all when None) start their frame stacks anew."""

@@ -17,12 +17,8 @@ from collections.abc import Sequence
 import torch
 from torch import nn
 
+from ..contracts.table3 import PAPER_CONV, PAPER_HIDDEN  # Table 3 (conf/model/network/table3.yaml)
 from ..observations import decode_hgm  # x / 127.5 - 1: the inverse of the builders' encoding
-
-# Table 3: [filters, kernel, stride] of the three conv layers.
-PAPER_CONV: list[list[int]] = [[32, 8, 4], [64, 4, 2], [64, 3, 1]]
-# Table 3: the two dense layers of each head.
-PAPER_HIDDEN: list[int] = [512, 256]
 
 
 def decode_camera(x: torch.Tensor) -> torch.Tensor:

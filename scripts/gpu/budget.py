@@ -126,7 +126,7 @@ def preset_learner(preset: str, device: str) -> Any:
     """The learner config the grid's jobs get (Hydra's own composition of conf/)."""
     from hydra import compose, initialize_config_dir
 
-    from hgm_repro.contracts.config_files import CONF_DIR
+    from hgm_repro.contracts.conf_dir import CONF_DIR
     from hgm_repro.contracts.schema import validate
 
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):

@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from hgm_repro.__main__ import quote_numeric_choices
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from tests.helpers.cli import hgm
 
 # Every test here checks the exit code itself, and the command line answers in seconds.

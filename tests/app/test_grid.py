@@ -9,7 +9,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import open_dict
 
 from hgm_repro.app.sweep import _sweep_jobs, sweep_overrides
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 
 
 def _config(*overrides: str, swept: tuple[str, ...] = ()):

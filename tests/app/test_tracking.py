@@ -18,7 +18,7 @@ from omegaconf import DictConfig
 from hgm_repro.app.job import RUN_ID_FILE, run_job
 from hgm_repro.app.provenance import git_info
 from hgm_repro.app.store import STORE_FORMAT_TAG, StoreError, Tracker, flatten, resolve_location, retry, tidy_number
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.errors import ConfigError
 from hgm_repro.contracts.interrupts import JobInterrupted
 from hgm_repro.contracts.schema import JobConfig, validate

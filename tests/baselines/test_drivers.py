@@ -7,7 +7,8 @@ import torch
 import yaml
 
 from baselines.drivers import HumanDriver, IdmMobilDriver, RandomDriver, attach, drive
-from hgm_repro.contracts.config_files import CONF_DIR, simulator_config
+from hgm_repro.contracts.conf_dir import CONF_DIR
+from hgm_repro.contracts.config_files import simulator_config
 from hgm_repro.simulator import N_ACTIONS, Action, HighwaySimulator
 from tests.helpers.sim import empty_road, make_sim, place
 

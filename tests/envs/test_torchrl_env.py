@@ -8,7 +8,7 @@ from hydra import compose, initialize_config_dir
 from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.schema import JobConfig, validate
 from hgm_repro.envs import make_env
 from hgm_repro.simulator import N_ACTIONS

@@ -5,7 +5,7 @@ from __future__ import annotations
 from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.schema import JobConfig, validate
 
 # Tiny on top of the smoke preset, so that every test trains in a few seconds. The observation

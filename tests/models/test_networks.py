@@ -11,7 +11,7 @@ from torch import nn
 
 from baselines.coordinate_net import CoordinateDuelingQNet
 from baselines.min_net import MinDuelingQNet
-from hgm_repro.contracts.config_files import CONF_DIR
+from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.schema import validate
 from hgm_repro.models.builders import make_network
 from hgm_repro.models.networks import (
@@ -133,3 +133,23 @@ def test_every_model_config_builds_its_network(model, keys):
     assert set(keys) <= {k for k, v in job.model.streams.items() if v not in ("none", False)} | {"coordinates"}
     counts = param_counts(net)
     assert counts["params/total"] == sum(v for k, v in counts.items() if k != "params/total")
+
+
+def test_table3_is_written_once_and_every_learned_model_uses_it():
+    """Table 3's conv stack lives in conf/model/network/table3.yaml only: the model configs include it
+    and the code's defaults (`PAPER_CONV`, `PAPER_HIDDEN`, the smallest image) are read from it."""
+    from pathlib import Path
+
+    from hgm_repro.contracts.table3 import MIN_IMAGE_SIDE, PAPER_CONV, PAPER_HIDDEN
+
+    repo = Path(CONF_DIR).parent
+    written = sorted(str(p.relative_to(repo)) for folder in ("conf", "hgm_repro", "baselines")
+                     for p in (repo / folder).rglob("*") if p.suffix in (".yaml", ".py")
+                     and "[32, 8, 4]" in p.read_text())
+    assert written == ["conf/model/network/table3.yaml"]
+    assert PAPER_CONV == [[32, 8, 4], [64, 4, 2], [64, 3, 1]] and PAPER_HIDDEN == [512, 256]
+    assert MIN_IMAGE_SIDE == 36  # 36 -> 8 -> 3 -> 1
+    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+        for model in ("proposed", "min", "coordinate"):
+            network = compose("config", overrides=[f"model={model}"]).model.network
+            assert [list(layer) for layer in network.conv] == PAPER_CONV and list(network.hidden) == PAPER_HIDDEN

@@ -7,7 +7,7 @@ import torch
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
-from hgm_repro.contracts.config_files import scenario_config, simulator_config
+from hgm_repro.contracts.config_files import observation_config, observation_node, scenario_config, simulator_config
 from hgm_repro.observations import (
     FrameStack,
     ObservationBuilder,
@@ -394,7 +394,21 @@ def test_frame_stack_flat_vectors():
 ])
 def test_config_rejects_bad_values(bad, match):
     with pytest.raises(ValueError, match=match):
-        ObservationConfig(**bad)
+        observation_config("proposed", **bad)
+
+
+def test_config_needs_every_field_from_the_config_files():
+    """No value has a second default in code: a node without a field is refused, naming it."""
+    node = observation_node()
+    del node["camera_height"]
+    with pytest.raises(ValueError, match=r"misses field\(s\) \['camera_height'\]"):
+        ObservationConfig.from_config(node, {"camera": "front", "hgm": "paper", "coordinates": False})
+    with pytest.raises(ValueError, match=r"model.streams misses field\(s\) \['coordinates'\]"):
+        ObservationConfig.from_config(observation_node(), {"camera": "front", "hgm": "paper"})
+    # The defaults are conf/config.yaml's, so the camera sits where the config file says.
+    from omegaconf import OmegaConf
+
+    assert observation_config("proposed").camera_height == OmegaConf.load("conf/config.yaml").observation.camera_height
 
 
 def test_config_from_nodes():
@@ -417,7 +431,7 @@ def test_config_from_nodes():
 ])
 def test_builder_shapes_match_specs(streams):
     sim = make_sim(n_envs=3)
-    cfg = ObservationConfig(frame_stack=2, coord_k=4, **streams)
+    cfg = observation_config(streams, frame_stack=2, coord_k=4)
     b = ObservationBuilder(sim, cfg)
     specs = b.specs()
     for obs in (b.reset(), b.step(), b.reset(torch.tensor([True, False, True]))):
@@ -428,7 +442,7 @@ def test_builder_shapes_match_specs(streams):
 
 def test_builder_reset_refills_only_masked_envs():
     sim = make_sim(n_envs=2)
-    b = ObservationBuilder(sim, ObservationConfig(camera="none", hgm="paper", frame_stack=3))
+    b = ObservationBuilder(sim, observation_config("proposed", camera="none", frame_stack=3))
     b.reset()
     for _ in range(3):
         sim.step(torch.full((2,), 4))
@@ -442,7 +456,7 @@ def test_builder_reset_refills_only_masked_envs():
 
 def test_builder_partial_reset_draws_the_reset_envs_as_a_full_frame_would():
     sim = make_sim(n_envs=3, seed=5)
-    cfg = ObservationConfig(camera="front", hgm="enriched", coordinates=True, frame_stack=3)
+    cfg = observation_config("proposed", hgm="enriched", coordinates=True, frame_stack=3)
     b = ObservationBuilder(sim, cfg)
     b.reset()
     for _ in range(2):

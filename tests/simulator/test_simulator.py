@@ -8,6 +8,7 @@ import pytest
 import torch
 from scipy import stats
 
+from hgm_repro.contracts.conf_dir import load_yaml
 from hgm_repro.contracts.config_files import scenario_config, simulator_config
 from hgm_repro.simulator import HOST, Action, ConfigError
 from tests.helpers.sim import calm, empty_road, make_sim, place
@@ -312,9 +313,14 @@ def test_episode_truncates_after_episode_time():
     (dict(v_min_kmh=80.0, v_max_kmh=80.0), ["v_min_kmh=80", "v_min < v_max"]),
     (dict(v_min_kmh=90.0), ["v_min_kmh=90", "v_max"]),
     (dict(physics_dt=0.3), ["decision_dt", "multiple"]),
-    (dict(vehicle_types={"HV": dict(a_lon=2, v_lat=1, r_lon=-0.1, r_lat=0, connected=True)}),
+    (dict(vehicle_types={"HV": dict(a_lon=2, v_lat=1, r_lon=-0.1, r_lat=0, connected=True, length=4.5, width=1.8,
+                                    lane_change_time_gap=1.0)}),
      ["r_lon=-0.1", "[0, 1]"]),
     (dict(vehicle_types={"CHV": dict(a_lon=2, v_lat=1, r_lon=0, r_lat=0, connected=False)}), ["'HV'"]),
+    # No value has a second default in code: a node without a field is refused, naming it.
+    (dict(vehicle_types={"HV": dict(a_lon=2, v_lat=1, r_lon=0, r_lat=0, connected=True)}),
+     ["vehicle_types.HV misses", "lane_change_time_gap", "length", "width"]),
+    (dict(reward={"collision": -20.0}), ["simulator.reward misses", "overtake"]),
     (dict(bogus=1), ["bogus", "allowed"]),
 ])
 def test_bad_simulator_config_names_the_value(overrides, words):
@@ -322,6 +328,14 @@ def test_bad_simulator_config_names_the_value(overrides, words):
         simulator_config(**overrides)
     for w in words:
         assert w in str(err.value)
+
+
+def test_simulator_node_without_a_field_is_refused():
+    """The YAML is the one place of each simulator value: a node that leaves one out is refused."""
+    raw = load_yaml("simulator", "highway")
+    del raw["lane_width"]
+    with pytest.raises(ConfigError, match=r"simulator misses field\(s\) \['lane_width'\]"):
+        simulator_config(raw)
 
 
 @pytest.mark.parametrize("ratios, words", [
