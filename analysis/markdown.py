@@ -12,7 +12,7 @@ from analysis.claims import ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
 from analysis.report import fmt_estimate
 from analysis.scale import is_smoke, scale_text
-from analysis.tables import PAPER_TABLE6
+from analysis.tables import PAPER_TABLE6, SAFE_COLLISIONS, beating_grid
 
 # The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
 SIDE_METRICS = ("collisions", "avg_speed_kmh", "dangerous_actions")
@@ -40,9 +40,25 @@ def _grid(summary: pd.DataFrame, metric: str, scenarios: list[str], paper: bool)
     return lines
 
 
+def beating_lines(beating: pd.DataFrame, scenarios: list[str]) -> list[str]:
+    """The seed-by-seed comparison with the human-driven host, as a Markdown section (none without it)."""
+    if beating.empty:
+        return []
+    grid = beating_grid(beating, scenarios)
+    lines = [f"## Seeds on which a host beats the human-driven host (more return, under {SAFE_COLLISIONS:g} "
+             "collisions per episode)", "",
+             "Each seed's test return is set against the human-driven host's on the same seed and scenario (the "
+             "same traffic); a mean can hide that only some seeds drive better.", "",
+             "| Method | " + " | ".join(f"Scenario {s}" for s in grid.columns) + " |",
+             "|---|" + "---:|" * len(grid.columns)]
+    for model, row in grid.iterrows():
+        lines.append(f"| {model_label(model, short=True)} | " + " | ".join(row) + " |")
+    return [*lines, ""]
+
+
 def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
                      evals: pd.DataFrame, commits: list[str], figures: dict[str, dict[str, Path]],
-                     out_dir: Path) -> str:
+                     out_dir: Path, beating: pd.DataFrame | None = None) -> str:
     """The Markdown text; figure links are relative to `out_dir`, where results.md is written."""
     scenarios = [s for s in SCENARIOS if s in set(summary["scenario"])] \
         or sorted(set(summary["scenario"]))
@@ -60,6 +76,7 @@ def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: 
         if metric in set(summary["metric"]):
             lines += [f"## {METRIC_LABELS[metric]}", "",
                       *_grid(summary, metric, scenarios, paper=False), ""]
+    lines += beating_lines(beating if beating is not None else pd.DataFrame(), scenarios)
     lines += ["## The paper's claims", "", "| # | Claim | Verdict | Evidence |", "|---|---|---|---|"]
     for claim in claims:
         evidence = "; ".join(c.text() for c in claim.comparisons).replace("|", "/")

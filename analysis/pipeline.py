@@ -200,6 +200,10 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     scalars, vtypes, env_source = _environment(data.runs)
 
     csvs = tables.write_csvs(summary, out_dir)
+    beating = tables.seeds_beating(evals, scenarios=scenarios)
+    beating_csv = out_dir / "seeds_beating_human.csv"
+    beating.to_csv(beating_csv, index=False)
+    csvs.append(beating_csv)
     claims_csv = out_dir / "claims.csv"
     claims_table(results).to_csv(claims_csv, index=False)
     csvs.append(claims_csv)
@@ -210,6 +214,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         figures={k: v["png"] for k, v in figures.items()}, training_numbers=_training_numbers(data.curves),
         env_scalars=scalars, vehicle_types=vtypes, env_source=env_source, pictures_note=pictures_note,
         test_grids=grids, paper_table=tables.paper_table6(), aggregate=_aggregate_text(evals, scenarios),
+        beating=tables.beating_grid(beating, scenarios) if not beating.empty else pd.DataFrame(),
         claims=results, discussion=discussion(results, counts, len(train_runs), evals),
         configs=_config_texts(data.configs),
         git_dirty=data.git_dirty, scenario_mix=scenario_mix(data.runs),
@@ -218,7 +223,8 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         config_runs=_config_runs(data.configs),
     )
     markdown = out_dir / "results.md"
-    markdown.write_text(results_markdown(summary, results, data.configs, evals, data.git_commits, figures, out_dir))
+    markdown.write_text(results_markdown(summary, results, data.configs, evals, data.git_commits, figures, out_dir,
+                                         beating))
     csvs.append(markdown)
     report = write_report(inputs, out_dir / "report.pdf")
     return Outputs(report=report, figures=figures, csvs=csvs)

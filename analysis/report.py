@@ -16,6 +16,7 @@ from PIL import Image
 from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
 from analysis.scenarios import PAPER_CV_RATIO
+from analysis.tables import SAFE_COLLISIONS
 
 # matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
 # latin-1 core fonts.
@@ -44,6 +45,7 @@ class ReportInputs:
     test_grids: dict[str, pd.DataFrame]  # metric -> model x scenario cell strings
     paper_table: pd.DataFrame
     aggregate: pd.DataFrame  # already formatted strings
+    beating: pd.DataFrame  # model x scenario 'k of n': seeds beating the human-driven host safely
     claims: list[ClaimResult]
     discussion: list[str]
     configs: dict[str, str]  # model -> resolved config text (or a diff against the first)
@@ -346,6 +348,15 @@ def _test_section(w: ReportWriter, inp: ReportInputs) -> None:
                "by stratified bootstrap over seeds.", size=8.5)
         rows = [list(inp.aggregate.columns)] + inp.aggregate.astype(str).to_numpy().tolist()
         w.table(rows, col_widths=[1.7, 0.8, 1.4, 1.4, 1.4], size=8)
+    if not inp.beating.empty:
+        w.heading(f"Seeds on which a host beats the human-driven host (more return, under {SAFE_COLLISIONS:g} "
+                  "collisions per episode)", keep_mm=_grid_table_height(inp.beating))
+        w.para("Each seed's test return against the human-driven host's on the same seed and scenario (the same "
+               "traffic): a mean over seeds can hide that only some seeds drive better.", size=8.5)
+        frame = inp.beating.copy()
+        frame.index = [model_label(m, short=True) for m in frame.index]
+        frame.columns = [f"Scenario {c}" if c in SCENARIOS else str(c) for c in frame.columns]
+        w.frame_table(frame, "Method", size=8, first_width=1.3)
     if "fig_test_results" in inp.figures:
         w.image(inp.figures["fig_test_results"], caption="Every test metric per scenario: mean over seeds and "
                 "95 % bootstrap CI; scenario k has CV ratio (k-1)/4.")

@@ -92,6 +92,43 @@ def aggregate(evals: pd.DataFrame, metric: str, scenarios: list[str],
     return pd.DataFrame(rows)
 
 
+# The bar a learned host clears on a seed when it drives better than the human-driven host there:
+# more test return than that seed's human-driven host in the same scenario, with under this many
+# collisions per episode (the human-driven host, under its safety layer, has none).
+SAFE_COLLISIONS = 0.2
+
+
+def seeds_beating(evals: pd.DataFrame, reference: str = "human", scenarios: list[str] | None = None,
+                  max_collisions: float = SAFE_COLLISIONS) -> pd.DataFrame:
+    """Long table, one row per (model, scenario) other than `reference`'s: `seeds`, those on which both the
+    model and `reference` were tested, and `beating`, those on which the model's test return exceeds the
+    reference's with under `max_collisions` collisions per episode. Empty without the reference."""
+    columns = ["model", "scenario", "seeds", "beating"]
+    needed = {"model", "scenario", "seed", "episode_return", "collisions"}
+    if evals.empty or not needed <= set(evals) or reference not in set(evals["model"]):
+        return pd.DataFrame(columns=columns)
+    cells = evals.groupby(["model", "scenario", "seed"])[["episode_return", "collisions"]].mean().reset_index()
+    ref = cells[cells["model"] == reference].rename(columns={"episode_return": "ref_return"})
+    paired = cells[cells["model"] != reference].merge(ref[["scenario", "seed", "ref_return"]], on=["scenario", "seed"])
+    paired["beating"] = (paired["episode_return"] > paired["ref_return"]) & (paired["collisions"] < max_collisions)
+    out = paired.groupby(["model", "scenario"]).agg(seeds=("seed", "nunique"), beating=("beating", "sum")).reset_index()
+    out["scenario"] = out["scenario"].astype(str)
+    if scenarios is not None:
+        out = out[out["scenario"].isin(scenarios)]
+    order = {m: i for i, m in enumerate(ordered_models(out["model"]))}
+    out = out.sort_values(["model", "scenario"], key=lambda c: c.map(order) if c.name == "model" else c)
+    return out[columns].astype({"seeds": int, "beating": int}).reset_index(drop=True)
+
+
+def beating_grid(beating: pd.DataFrame, scenarios: list[str]) -> pd.DataFrame:
+    """Method x scenario cells 'k of n' from `seeds_beating`; '-' where a cell has no paired seed."""
+    grid = pd.DataFrame("-", index=pd.Index(ordered_models(beating["model"]), name="model"), columns=scenarios)
+    for row in beating.itertuples(index=False):
+        if row.scenario in scenarios:
+            grid.loc[row.model, row.scenario] = f"{row.beating} of {row.seeds}"
+    return grid
+
+
 def paper_table6() -> pd.DataFrame:
     table = PAPER_TABLE6.copy()
     table.index = [model_label(m, short=True) for m in table.index]

@@ -146,3 +146,39 @@ def test_report_of_one_model_alone(tmp_path: Path) -> None:
     assert main(["--tracking-uri", uri, "--out", str(out), "--no-pictures"]) == 0
     assert image_variance(out / "fig_test_results.png") > 0
     assert "| Proposed | 3 |" in (out / "results.md").read_text()
+
+
+def test_seeds_beating_the_human_driven_host_pairs_each_seed_with_its_own_traffic() -> None:
+    from analysis.tables import beating_grid, seeds_beating
+
+    rows = [("human", "3", 0, 200.0, 0.0), ("human", "3", 1, 250.0, 0.0), ("human", "3", 2, 180.0, 0.0),
+            # seed 0: more return, safe -> counts; seed 1: 240 < 250 -> not (though above seed 0's human);
+            # seed 2: more return but 0.25 collisions -> not.
+            ("proposed", "3", 0, 210.0, 0.1), ("proposed", "3", 1, 240.0, 0.0), ("proposed", "3", 2, 300.0, 0.25),
+            # a seed the human-driven host was not tested on is not paired.
+            ("proposed", "3", 3, 400.0, 0.0), ("min", "3", 0, 100.0, 0.9)]
+    evals = pd.DataFrame(rows, columns=["model", "scenario", "seed", "episode_return", "collisions"])
+    table = seeds_beating(evals)
+    assert table.to_dict("records") == [
+        {"model": "proposed", "scenario": "3", "seeds": 3, "beating": 1},
+        {"model": "min", "scenario": "3", "seeds": 1, "beating": 0}]
+    assert beating_grid(table, ["1", "3"]).loc["proposed"].tolist() == ["-", "1 of 3"]
+    assert seeds_beating(evals[evals["model"] != "human"]).empty  # no reference host: no comparison
+
+
+def test_report_counts_the_seeds_that_beat_the_human_driven_host(full_store: str, full_report: Path,
+                                                                 full_text: str) -> None:
+    client = MlflowClient(tracking_uri=full_store)
+    exp = client.get_experiment_by_name("hgm_repro")
+    runs = pd.DataFrame([{"model": r.data.tags["model"], "scenario": r.data.tags["scenario"],
+                          "seed": int(r.data.tags["seed"]), "ret": r.data.metrics["eval/episode_return"],
+                          "col": r.data.metrics["eval/collisions"]}
+                         for r in client.search_runs([exp.experiment_id], "tags.stage = 'eval'", max_results=1000)])
+    human = runs[runs["model"] == "human"].set_index(["scenario", "seed"])["ret"]
+    table = pd.read_csv(full_report / "seeds_beating_human.csv", dtype={"scenario": str})
+    assert set(table["model"]) == {"proposed", "min", "coordinate"}
+    for row in table.itertuples():
+        mine = runs[(runs["model"] == row.model) & (runs["scenario"] == row.scenario)]
+        wins = sum(r.ret > human[(row.scenario, r.seed)] and r.col < 0.2 for r in mine.itertuples())
+        assert (row.seeds, row.beating) == (len(SEEDS), wins), row
+    assert "beats the human-driven host" in full_text
