@@ -288,6 +288,15 @@ def _member_job(device: torch.device, total_steps: int, seed: int, threads: int,
                     f"logging.log_every={log_every or total_steps * 10}")
 
 
+def _quiet_torchrl() -> None:
+    """stdout carries only the JSON lines: TorchRL logs its storage set-up there at INFO level (and
+    sets that level when first imported, so import it before turning it down). Each process that
+    trains calls this: the parallel path's workers are fresh processes."""
+    import torchrl  # noqa: F401
+
+    logging.getLogger("torchrl").setLevel(logging.WARNING)
+
+
 def _train_member(device: str, total_steps: int, seed: int, threads: int, directory: str) -> tuple[int, int]:
     """Train one member alone (in whichever process calls it); its (env steps, updates)."""
     from pathlib import Path
@@ -295,6 +304,7 @@ def _train_member(device: str, total_steps: int, seed: int, threads: int, direct
     from .contracts.checkpoint import load_checkpoint
     from .learner import train
 
+    _quiet_torchrl()
     job = _member_job(torch.device(device), total_steps, seed, threads)
     final = load_checkpoint(train(job, Path(directory), lambda metrics, step: None))
     return int(final["env_steps"]), int(final["updates"])
@@ -469,11 +479,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--device", choices=["cpu", "cuda", "all"], default="all",
                         help="which devices to measure (default: every one present)")
     args = parser.parse_args(argv)
-    # stdout carries only the JSON lines: TorchRL logs its storage set-up there at INFO level
-    # (and sets that level when first imported, so import it before turning it down).
-    import torchrl  # noqa: F401
-
-    logging.getLogger("torchrl").setLevel(logging.WARNING)
+    _quiet_torchrl()
     if args.threads:
         torch.set_num_threads(args.threads)
     parts = set(args.only or PARTS)

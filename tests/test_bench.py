@@ -43,9 +43,11 @@ def test_bench_measures_the_torchrl_env_and_the_gymnasium_vector_env_side_by_sid
 
 
 @pytest.mark.slow  # five short trainings: about a minute on a busy CPU
-def test_bench_grouped_training_lines_for_members_grouped_solo_and_parallel(capsys):
+def test_bench_grouped_training_lines_for_members_grouped_solo_and_parallel(capfd):
     assert main(["--only", "grouped", "--train-steps", "128", "--members", "2", "--device", "cpu"]) == 0
-    rows = [json.loads(line) for line in capsys.readouterr().out.splitlines() if line.strip()]
+    # capfd, not capsys: the parallel path's worker processes write to the same stdout, and every
+    # line there must be JSON too (their TorchRL logging once was not).
+    rows = [json.loads(line) for line in capfd.readouterr().out.splitlines() if line.strip()]
     assert [(r["members"], r["path"], r["torch_threads"] == 1) for r in rows][:1] == \
         [(1, "solo, one after another", True)]
     parallel = {(2, "solo, 2 jobs at once")} if torch.get_num_threads() > 1 else set()
