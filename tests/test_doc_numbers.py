@@ -1,0 +1,63 @@
+"""The numbers docs/results-narrative.md tells in words are the committed results bundle's: its test
+table and the scenario-3 seeds it quotes are checked against docs/results, so that a re-run grid
+cannot leave the narrative behind unnoticed."""
+
+from __future__ import annotations
+
+import re
+
+import pandas as pd
+import pytest
+
+from analysis.tables import summary
+from tests.helpers import REPO_ROOT
+
+NARRATIVE = REPO_ROOT / "docs" / "results-narrative.md"
+BUNDLE = REPO_ROOT / "docs" / "results"
+# The narrative's row labels and the models they stand for.
+ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (camera + V2X list)": "coordinate",
+        "Human-driven host": "human", "IDM + MOBIL": "idm_mobil",
+        "IDM + MOBIL inside the host's limits": "idm_mobil_limits"}
+
+
+def _evals() -> pd.DataFrame:
+    return pd.read_csv(BUNDLE / "evals.csv", dtype={"scenario": str})
+
+
+def _table_rows(text: str) -> dict[str, list[str]]:
+    """The narrative's test-return table: row label -> its five scenario cells."""
+    section = text.split("## Test results", 1)[1].split("\n## ", 1)[0]
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if cells and cells[0] in ROWS:
+            rows[cells[0]] = cells[1:]
+    return rows
+
+
+@pytest.mark.skipif(not (BUNDLE / "evals.csv").is_file(), reason="no committed results bundle")
+def test_the_narratives_test_table_is_the_bundles_to_the_digit():
+    table = summary(_evals(), ("episode_return",)).set_index(["model", "scenario"])
+    rows = _table_rows(NARRATIVE.read_text())
+    assert set(rows) == set(ROWS)
+    for label, cells in rows.items():
+        assert len(cells) == 5, label
+        for scenario, cell in zip("12345", cells, strict=True):
+            mean, low, high = (float(x) for x in re.match(r"(-?\d+) \[(-?\d+), (-?\d+)\]", cell).groups())
+            want = table.loc[(ROWS[label], scenario)]
+            for shown, exact in ((mean, want["mean"]), (low, want["low"]), (high, want["high"])):
+                assert abs(shown - exact) <= 0.5 + 1e-9, (label, scenario, cell, exact)
+
+
+@pytest.mark.skipif(not (BUNDLE / "evals.csv").is_file(), reason="no committed results bundle")
+def test_the_scenario_3_seeds_the_narrative_quotes_are_the_bundles():
+    evals = _evals()
+    s3 = evals[evals["scenario"] == "3"].set_index(["model", "seed"])
+    text = " ".join(NARRATIVE.read_text().split())
+    quoted = re.search(r"Per seed: ([\d, ]+) against ([\d, ]+), with ([\d., ]+) collisions", text)
+    assert quoted, "the narrative's per-seed sentence for scenario 3 is gone"
+    returns, human, collisions = ([float(x) for x in g.replace(",", " ").split()] for g in quoted.groups())
+    for seed in range(5):
+        assert abs(returns[seed] - s3.loc[("proposed", seed), "episode_return"]) <= 0.5
+        assert abs(human[seed] - s3.loc[("human", seed), "episode_return"]) <= 0.5
+        assert abs(collisions[seed] - s3.loc[("proposed", seed), "collisions"]) <= 0.005 + 1e-9
