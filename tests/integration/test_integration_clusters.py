@@ -21,6 +21,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import time
 from collections import Counter
 from collections.abc import Iterator
 from pathlib import Path
@@ -133,6 +134,27 @@ def logs_of(root: Path) -> str:
     return "".join(f"\n== {p.name}\n{p.read_text(errors='replace')[-2000:]}" for p in sorted(root.glob("*.log")))
 
 
+# A task's job ends a moment after it writes its result, which is what the sweep waits for; slurmd then
+# tells slurmctld, which tells slurmdbd: sacct can show the last attempt RUNNING for some seconds after
+# the sweep returned (CI saw it once). States in which SLURM has not yet settled a task's attempt:
+UNSETTLED_STATES = {"PENDING", "RUNNING", "COMPLETING", "CONFIGURING", "REQUEUED", "RESIZING", "SUSPENDED"}
+
+
+def settled_accounting(array_id: str, env: dict[str, str], timeout: float = 120.0) -> str:
+    """sacct's records of every attempt of the array's tasks, once each task's last attempt has ended
+    (or, after `timeout` seconds, as they are then, for the assertions to report)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        accounting = subprocess.run(["sacct", "--duplicates", "--allocations", "--noheader", "--parsable2", "-j",
+                                     array_id, "--format=JobID,State,Start,End,Elapsed,ExitCode"], env=env,
+                                    capture_output=True, text=True, timeout=60, check=True).stdout
+        records = (line.split("|") for line in accounting.strip().splitlines())
+        last_state = {job_id: state for job_id, state, *_ in records}  # sacct lists attempts in order
+        if (last_state and not set(last_state.values()) & UNSETTLED_STATES) or time.monotonic() > deadline:
+            return accounting
+        time.sleep(2)
+
+
 def test_slurm_job_array_requeued_by_the_time_limit_signal_resumes(store_server: str,
                                                                   slurm_cluster: dict[str, str],
                                                                   tmp_path: Path) -> None:
@@ -149,9 +171,7 @@ def test_slurm_job_array_requeued_by_the_time_limit_signal_resumes(store_server:
     assert any(int(r.data.tags.get("resumes", "0")) >= 1 for r in train), [r.data.tags for r in train]
 
     (array_id,) = {p.name.split("_")[0] for p in submitit.iterdir() if p.is_dir() and "_" in p.name}
-    accounting = subprocess.run(["sacct", "--duplicates", "--allocations", "--noheader", "--parsable2", "-j", array_id,
-                                 "--format=JobID,State,Start,End,Elapsed,ExitCode"], env=slurm_cluster,
-                                capture_output=True, text=True, timeout=60, check=True).stdout
+    accounting = settled_accounting(array_id, slurm_cluster)
     print(f"sacct --duplicates --allocations -j {array_id}:\n{accounting}")
     records = [line.split("|") for line in accounting.strip().splitlines()]
     assert any(state == "REQUEUED" for _, state, *_ in records), accounting
