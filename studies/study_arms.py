@@ -119,7 +119,7 @@ _ARMS: dict[str, list[str]] = {
     # (occupancy and host channels), which answers the first too.
     "r20_host_cell": R20_ALL + ["observation.hgm_host_cell=own_range"],
     "r20_ahead": R20_ALL + ["observation.hgm_ahead=80"],
-    "r20_enriched": R20_ALL + ["observation.hgm=enriched"],
+    "r20_enriched": R20_ALL + ["model.streams.hgm=enriched"],
     # What the camera shows: the r20_all host's crashes are mostly lane changes into slow unconnected
     # cars just ahead in the next lane, which only the camera shows (docs/study.md section 9); at
     # 36x36 such a car sits at the image's edge as a few pixels. The paper's 84x84 with 4 frames.

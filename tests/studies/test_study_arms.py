@@ -1,0 +1,31 @@
+"""studies/study_arms.py: every arm is a list of overrides that the quick preset accepts (an arm with a
+key no config has would fail only after the study has queued it, as r20_enriched once did)."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+from hydra import compose, initialize_config_dir
+
+from hgm_repro.contracts.conf_dir import CONF_DIR
+from hgm_repro.contracts.schema import validate
+from tests.helpers import REPO_ROOT
+
+sys.path.insert(0, str(REPO_ROOT / "studies"))
+from study_arms import ARMS  # noqa: E402 - studies/ is a folder of scripts, not a package
+
+
+@pytest.mark.parametrize("arm", sorted(ARMS))
+def test_every_arm_composes_and_validates_on_the_quick_preset(arm: str) -> None:
+    overrides = ["seed=100", "scenario=train", "experiment=quick", "eval.checkpoint=final", *ARMS[arm]]
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("config", overrides=overrides)
+    validate(cfg)
+    for override in ARMS[arm]:  # each override reached the config, with the value the arm states
+        key, value = override.split("=", 1)
+        node = cfg
+        for part in key.split("."):
+            node = node[part]
+        assert str(node).lower() == value.lower() or float(node) == float(value), (arm, override, node)
+
