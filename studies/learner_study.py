@@ -1,7 +1,8 @@
 """The learner study: which options make the quick preset's host learn to drive.
 
     python studies/learner_study.py run --arms base nstep --seeds 100 101 [--parallel 2] [--references]
-    python studies/learner_study.py report [--store A.db B.db] [--out docs/study]
+    python studies/learner_study.py report [--store A.db B.db] [--out docs/study] \
+        [--earlier docs/study/r20/learner_study_per_seed.csv --earlier-arms r20_all@best]
 
 `run` trains and evaluates each (arm, seed) with `python -m hgm_repro` in the training traffic,
 into one SQLite store (`studies/runs/study.db` by default; the runs resume if interrupted);
@@ -86,6 +87,11 @@ def main(argv: list[str] | None = None) -> None:
     rep.add_argument("--store", type=Path, nargs="+", default=[RUNS / "study.db"],
                      help="one or more study stores (e.g. one per session)")
     rep.add_argument("--out", type=Path, default=ROOT / "docs" / "study")
+    rep.add_argument("--earlier", type=Path, metavar="PER_SEED_CSV",
+                     help="an earlier report's learner_study_per_seed.csv, whose --earlier-arms rows join the "
+                          "table (arms measured in a session whose store is gone)")
+    rep.add_argument("--earlier-arms", nargs="+", default=[], metavar="ARM",
+                     help="the rows of --earlier to show, e.g. r20_all r20_all@best")
     a = p.parse_args(argv)
     if a.cmd == "run":
         bad = [s for s in a.seeds if 0 <= s <= 4]
@@ -95,9 +101,11 @@ def main(argv: list[str] | None = None) -> None:
             p.error("nothing to run: name --arms, or --references, or both")
         run(a.arms, a.seeds, a.parallel, a.store, a.also_best, a.references)
     else:
-        from study_report import report
+        from study_report import earlier_results, report
 
-        report(a.store, a.out)
+        if bool(a.earlier) != bool(a.earlier_arms):
+            p.error("--earlier and --earlier-arms go together: the CSV and the arms to take from it")
+        report(a.store, a.out, earlier_results(a.earlier, a.earlier_arms) if a.earlier else None)
 
 
 if __name__ == "__main__":

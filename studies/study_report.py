@@ -97,7 +97,8 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                     for point in client.get_metric_history(r.info.run_id, m):
                         curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step,
                                        "value": point.value})
-    return pd.DataFrame(results), pd.DataFrame(curves)
+    return (pd.DataFrame(results, columns=["arm", "seed", *RESULTS]),
+            pd.DataFrame(curves, columns=["arm", "seed", "metric", "step", "value"]))
 
 
 def _colour(arm: str, curves: pd.DataFrame) -> str:
@@ -117,9 +118,43 @@ def _bar_count(grp: pd.DataFrame, results: pd.DataFrame) -> int:
     return int(sum(wins))
 
 
-def report(stores: list[Path], out: Path) -> None:
+def earlier_results(per_seed_csv: Path, arms: list[str]) -> pd.DataFrame:
+    """The rows of `arms` from an earlier report's learner_study_per_seed.csv: an arm measured in another
+    session (whose store is gone) stands beside the new ones in the table, from its committed numbers."""
+    earlier = pd.read_csv(per_seed_csv)
+    missing = sorted(set(arms) - set(earlier["arm"]))
+    if missing:
+        raise SystemExit(f"{per_seed_csv} has no rows for {missing}; it has {sorted(set(earlier['arm']))}")
+    return earlier[earlier["arm"].isin(arms)][["arm", "seed", *RESULTS]]
+
+
+def markdown_table(results: pd.DataFrame, summary: pd.DataFrame) -> str:
+    """The study's table as docs/study.md shows it: per seed `return, collisions`, the mean over seeds
+    with its 95% CI and the IQM, the collisions with their CI, and the seeds that meet issue 20's bar."""
+    seeds = sorted(results["seed"].unique())
+    head = ["host", *map(str, seeds), "return: mean [95% CI], IQM", "collisions [95% CI]", "bar"]
+    lines = ["| " + " | ".join(head) + " |", "| " + " | ".join(["---"] * (len(head) - 1) + ["---:"]) + " |"]
+    per_seed = results.set_index(["arm", "seed"])
+    for arm, row in summary.iterrows():
+        cells = [f"`{arm}`"]
+        for seed in seeds:
+            hit = per_seed.loc[(arm, seed)] if (arm, seed) in per_seed.index else None
+            cells.append("" if hit is None else f"{hit['episode_return']:.0f}, {hit['collisions']:.2f}")
+        cells.append(f"{row['episode_return']:.0f} [{row['episode_return_lo']:.0f}, {row['episode_return_hi']:.0f}], "
+                     f"{row['episode_return_iqm']:.0f}")
+        cells.append(f"{row['collisions']:.2f} [{row['collisions_lo']:.2f}, {row['collisions_hi']:.2f}]")
+        cells.append("" if arm in STUDY_REFERENCES else f"{row['seeds_beating_human_under_0.2']} of {row['seeds']}")
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -> None:
+    """Curves, the per-seed and summary CSVs and the Markdown table of `stores` into `out`; `earlier`
+    (from `earlier_results`) adds arms measured before, for the table and CSVs only (no curves)."""
     out.mkdir(parents=True, exist_ok=True)
     results, curves = load(stores)
+    if earlier is not None:
+        results = pd.concat([results, earlier[~earlier["arm"].isin(set(results["arm"]))]], ignore_index=True)
     results = results.drop_duplicates(["arm", "seed"], keep="first").sort_values(["arm", "seed"])
     results.to_csv(out / "learner_study_per_seed.csv", index=False)
     rows = []
@@ -141,6 +176,7 @@ def report(stores: list[Path], out: Path) -> None:
              if a in set(results["arm"])]
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
+    (out / "learner_study_table.md").write_text(markdown_table(results, summary))
 
     fig, axes = plt.subplots(1, len(CURVES), figsize=(4.6 * len(CURVES), 3.8))
     for ax, metric in zip(axes, CURVES, strict=True):

@@ -1,0 +1,42 @@
+"""studies/study_report.py's table: the per-seed cells, the bar count against each seed's human-driven
+host, and rows taken from an earlier report's CSV."""
+
+from __future__ import annotations
+
+import sys
+
+import pandas as pd
+import pytest
+
+from tests.helpers import REPO_ROOT
+
+sys.path.insert(0, str(REPO_ROOT / "studies"))
+import study_report  # noqa: E402 - studies/ is a folder of scripts, not a package
+
+
+def _rows(arm: str, returns: list[float], collisions: list[float], seeds=(100, 101, 102)) -> list[dict]:
+    return [{"arm": arm, "seed": s, "episode_return": r, "collisions": c, "dangerous_actions": 0.0,
+             "avg_speed_kmh": 50.0, "lane_changes": 0.0, "overtakes": 0.0}
+            for s, r, c in zip(seeds, returns, collisions, strict=True)]
+
+
+def test_the_table_counts_a_seed_only_when_it_beats_that_seeds_human_host_under_0_2_collisions(tmp_path):
+    results = pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0])
+                           # beats 240 safely; beats 220 but crashes 0.2 (not under); below 230
+                           + _rows("r20_all@best", [241, 300, 229], [0.1, 0.2, 0.0]))
+    earlier = tmp_path / "learner_study_per_seed.csv"
+    results.to_csv(earlier, index=False)
+    study_report.report([], tmp_path / "out", study_report.earlier_results(earlier, ["human", "r20_all@best"]))
+    table = (tmp_path / "out" / "learner_study_table.md").read_text().splitlines()
+    (row,) = [line for line in table if line.startswith("| `r20_all@best`")]
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[1:4] == ["241, 0.10", "300, 0.20", "229, 0.00"]
+    assert cells[-1] == "1 of 3"
+    assert cells[4] == "257 [229, 300], 257"  # the mean, its bootstrap CI, the IQM (3 seeds: none trimmed)
+
+
+def test_an_arm_the_earlier_report_lacks_is_refused_by_name(tmp_path):
+    earlier = tmp_path / "learner_study_per_seed.csv"
+    pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0])).to_csv(earlier, index=False)
+    with pytest.raises(SystemExit, match=r"no rows for \['r20_all'\]"):
+        study_report.earlier_results(earlier, ["r20_all"])
