@@ -150,11 +150,12 @@ def markdown_table(results: pd.DataFrame, summary: pd.DataFrame) -> str:
 
 def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -> None:
     """Curves, the per-seed and summary CSVs and the Markdown table of `stores` into `out`; `earlier`
-    (from `earlier_results`) adds arms measured before, for the table and CSVs only (no curves)."""
+    (from `earlier_results`) adds (arm, seed) results measured before that the stores lack, for the table
+    and CSVs only (no curves)."""
     out.mkdir(parents=True, exist_ok=True)
     results, curves = load(stores)
-    if earlier is not None:
-        results = pd.concat([results, earlier[~earlier["arm"].isin(set(results["arm"]))]], ignore_index=True)
+    if earlier is not None:  # an (arm, seed) in the store keeps the store's numbers (the first of duplicates)
+        results = pd.concat([results, earlier], ignore_index=True)
     results = results.drop_duplicates(["arm", "seed"], keep="first").sort_values(["arm", "seed"])
     results.to_csv(out / "learner_study_per_seed.csv", index=False)
     rows = []

@@ -40,3 +40,16 @@ def test_an_arm_the_earlier_report_lacks_is_refused_by_name(tmp_path):
     pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0])).to_csv(earlier, index=False)
     with pytest.raises(SystemExit, match=r"no rows for \['r20_all'\]"):
         study_report.earlier_results(earlier, ["r20_all"])
+
+
+def test_an_earlier_row_fills_only_the_seeds_the_store_lacks(tmp_path):
+    earlier = tmp_path / "learner_study_per_seed.csv"
+    pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0]) + _rows("r20_all", [10, 20, 30], [1, 1, 1])).to_csv(
+        earlier, index=False)
+    # A store's re-run of seed 100 (here given as the earlier frame's first rows, which the store's are).
+    store_like = pd.DataFrame(_rows("r20_all", [99], [0.5], seeds=(100,)))
+    merged = pd.concat([store_like, study_report.earlier_results(earlier, ["human", "r20_all"])], ignore_index=True)
+    study_report.report([], tmp_path / "out", merged)
+    per_seed = pd.read_csv(tmp_path / "out" / "learner_study_per_seed.csv").set_index(["arm", "seed"])
+    assert per_seed.loc[("r20_all", 100), "episode_return"] == 99
+    assert list(per_seed.loc["r20_all"]["episode_return"]) == [99, 20, 30]
