@@ -61,3 +61,14 @@ def test_the_scenario_3_seeds_the_narrative_quotes_are_the_bundles():
         assert abs(returns[seed] - s3.loc[("proposed", seed), "episode_return"]) <= 0.5
         assert abs(human[seed] - s3.loc[("human", seed), "episode_return"]) <= 0.5
         assert abs(collisions[seed] - s3.loc[("proposed", seed), "collisions"]) <= 0.005 + 1e-9
+
+
+STUDY = REPO_ROOT / "docs" / "study.md"
+STUDY_TABLE = REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md"
+
+
+@pytest.mark.skipif(not STUDY_TABLE.is_file(), reason="no committed study table")
+def test_study_section_10s_table_is_the_one_the_study_report_wrote():
+    section = STUDY.read_text().split("## 10. ", 1)[1].split("\n## ", 1)[0]
+    table = STUDY_TABLE.read_text().strip()
+    assert table in section, "docs/study.md section 10's table differs from docs/study/r20_arms/learner_study_table.md"
