@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import logging
 import os
+import signal
 import sys
 import tempfile
 import time
@@ -98,6 +99,13 @@ def hydra_job(cfg: DictConfig) -> float | None:
     except (ConfigError, StoreError, CheckpointMismatchError) as error:
         print(f"hgm_repro: {error}", file=sys.stderr)
         raise SystemExit(BAD_INPUT_EXIT) from error
+    if os.environ.get("SLURM_JOB_ID"):
+        # The job's work is done and recorded. A SLURM task runs one job, so the time-limit signal
+        # (USR2, sent `signal_delay_s` early) can now only come while submitit writes the result or
+        # Python exits: requeueing would repeat a finished job, and a USR2 after submitit's own
+        # handling ends kills the process, so that SLURM marks a finished job FAILED (CI saw both
+        # tasks of an array FAILED on signal 12 a second after "Job completed successfully").
+        signal.signal(signal.SIGUSR2, signal.SIG_IGN)
     # What a Hydra sweeper optimises: the validation return, never a test scenario's.
     if multirun and outcome.validation_return is None and outcome.training.how != "none":
         log.warning("no %s in training run %s (validation off: eval.val_every=0): a sweeper gets "
