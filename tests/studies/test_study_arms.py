@@ -7,6 +7,7 @@ import sys
 
 import pytest
 from hydra import compose, initialize_config_dir
+from omegaconf import OmegaConf
 
 from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.schema import validate
@@ -24,8 +25,5 @@ def test_every_arm_composes_and_validates_on_the_quick_preset(arm: str) -> None:
     validate(cfg)
     for override in ARMS[arm]:  # each override reached the config, with the value the arm states
         key, value = override.split("=", 1)
-        node = cfg
-        for part in key.split("."):
-            node = node[part]
+        node = OmegaConf.select(cfg, key)
         assert str(node).lower() == value.lower() or float(node) == float(value), (arm, override, node)
-
