@@ -8,6 +8,7 @@ import textwrap
 from pathlib import Path
 
 from analysis.bundle import BundleError, describe, load_bundle, write_bundle
+from analysis.combine import combine
 from analysis.load import EmptyStoreError, StoreData, default_tracking_uri, load_store
 
 
@@ -30,6 +31,7 @@ examples:
   python -m analysis --write-bundle results/ --no-report    # store -> bundle only
   python -m analysis --write-bundle results/                # store -> bundle and reports/
   python -m analysis --bundle results/ --out reports/       # bundle -> reports/, no store needed
+  python -m analysis --bundle results/ variant/ --write-bundle results/   # a variant's bundle into the grid's
 """
 
 
@@ -48,8 +50,10 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     source.add_argument("--tracking-uri", default=None,
                         help="MLflow tracking URI (default: sqlite file mlflow.db in the current directory, "
                              "the same store `python -m hgm_repro` writes to)")
-    source.add_argument("--bundle", type=Path, default=None, metavar="DIR",
-                        help="read a results bundle (written by --write-bundle) instead of a store")
+    source.add_argument("--bundle", type=Path, nargs="+", default=None, metavar="DIR",
+                        help="read a results bundle (written by --write-bundle) instead of a store; several "
+                             "bundles are read as one (a variant beside the published grid), and a model that a "
+                             "later bundle holds replaces that model's runs in the earlier ones")
     parser.add_argument("--experiment", default="hgm_repro", help="MLflow experiment name (default: hgm_repro)")
     parser.add_argument("--write-bundle", type=Path, default=None, metavar="DIR",
                         help="also write what was read (store or bundle) as a results bundle into DIR")
@@ -68,7 +72,7 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
 
 def _read(args: argparse.Namespace) -> StoreData:
     if args.bundle is not None:
-        return load_bundle(args.bundle)
+        return combine([load_bundle(directory) for directory in args.bundle])
     return load_store(args.tracking_uri or default_tracking_uri(), args.experiment)
 
 
