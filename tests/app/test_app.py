@@ -20,7 +20,7 @@ QUICK = {"check": False, "timeout": 120}
 def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
     out = hgm(tmp_path, "--help", **QUICK)
     assert out.returncode == 0, out.stderr
-    for line in ("experiment: paper, quick, smoke", "launcher: basic, joblib", "learner: dqn",
+    for line in ("experiment: paper, quick, quick160, smoke", "launcher: basic, joblib", "learner: dqn",
                  "model: coordinate, human, idm_limits, idm_mobil, idm_mobil_limits, min, proposed, "
                  "proposed_enriched, random",
                  "scenario: 1, 2, 3, 4, 5, train",
