@@ -14,6 +14,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import pandas as pd  # noqa: E402
 import yaml  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
+from matplotlib.ticker import FuncFormatter  # noqa: E402
 from mlflow import MlflowClient  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 from study_arms import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
@@ -47,6 +48,12 @@ def arm_signatures() -> dict[str, dict[str, object]]:
     base = {k: _value(OmegaConf.select(defaults, k)) for k in keys}
     return {arm: {**base, **{o.split("=", 1)[0]: _value(o.split("=", 1)[1]) for o in overrides}}
             for arm, overrides in ARMS.items()}
+
+
+def _steps_axis(ax: plt.Axes) -> None:
+    # Thousands of steps: six-digit tick labels run into each other on a 160k-step run.
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
+    ax.set_xlabel("env steps")
 
 
 def _arm_of(params: dict[str, str], signatures: dict[str, dict[str, object]]) -> str | None:
@@ -189,7 +196,7 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
             # One colour per arm in every panel, whichever arms a panel has.
             ax.plot(mean.index, mean.values, color=_colour(arm, curves),
                     label=f"{arm} ({seeds} seed{'s' if seeds > 1 else ''})")
-        ax.set_xlabel("env steps")
+        _steps_axis(ax)
         ax.set_title(metric + (" (greedy)" if metric.startswith("val/") else " (epsilon-greedy)"))
     axes[0].legend(fontsize=7)
     fig.tight_layout()
@@ -223,7 +230,7 @@ def _validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path
             ax.axhline(float(human.iloc[0]), color="black", linestyle="--", linewidth=1,
                        label="human-driven host (test)")
         ax.set_title(f"seed {seed}")
-        ax.set_xlabel("env steps")
+        _steps_axis(ax)
     axes[0][0].set_ylabel("greedy validation return")
     axes[0][0].legend(fontsize=7)
     fig.tight_layout()
