@@ -37,7 +37,8 @@ def _without(data: StoreData, models: set[str]) -> dict[str, pd.DataFrame]:
 
 
 def _unique_join(values: list[str]) -> str:
-    return "; ".join(dict.fromkeys(v for v in values if v))
+    # A combined source's value is itself such a join: split it, so that no name repeats.
+    return "; ".join(dict.fromkeys(part for v in values for part in v.split("; ") if part))
 
 
 def combine(parts: list[StoreData]) -> StoreData:

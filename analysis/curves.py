@@ -58,9 +58,12 @@ def fluctuation_values(curves: pd.DataFrame, metric: str) -> pd.DataFrame:
     """Per run: standard deviation of the binned curve's bin-to-bin changes.
 
     A steadily rising curve scores low; one that jumps up and down between neighbouring bins
-    scores high, whatever its level.
+    scores high, whatever its level. Each model's runs are binned on a grid of their own length, so
+    that a run's number does not move when a longer run of another model (a variant) joins the data.
     """
-    binned = bin_curves(curves, metric)
+    part = curves[curves["metric"] == metric]
+    binned = (pd.concat([bin_curves(group, metric) for _, group in part.groupby("model")], ignore_index=True)
+              if not part.empty else bin_curves(part, metric))
     rows = []
     for (model, seed, run_id), group in binned.groupby(["model", "seed", "run_id"]):
         steps = np.diff(group.sort_values("step")["value"].to_numpy())

@@ -11,6 +11,8 @@ from typing import Any
 import pandas as pd
 import yaml
 
+from analysis.labels import model_label
+
 PAPER_STEPS = 1_000_000
 SMOKE_PRESET = "smoke"
 
@@ -45,9 +47,15 @@ def scale_text(configs: dict[str, str], evals: pd.DataFrame) -> str:
     learner, obs = config.get("learner", {}), config.get("observation", {})
     parts = []
     if learner:
-        parts.append(f"preset `{', '.join(presets(configs)) or '?'}`: {learner.get('total_steps', 0):,} "
-                     f"training steps per seed (paper {PAPER_STEPS:,}), images {obs.get('height')}x{obs.get('width')} "
-                     f"with {obs.get('frame_stack')} frames (paper 84x84, 4)")
+        steps = learner.get("total_steps", 0)
+        # A model trained at another budget (a variant published beside the grid) says so here.
+        others = "".join(f", {model_label(m, short=True)} {c['learner']['total_steps']:,}"
+                         for m, c in sorted(parsed.items()) if c.get("model", {}).get("learned")
+                         and c.get("learner", {}).get("total_steps", steps) != steps)
+        parts.append(f"preset `{', '.join(presets(configs)) or '?'}`: {steps:,} "
+                     f"training steps per seed{others} (paper {PAPER_STEPS:,}), "
+                     f"images {obs.get('height')}x{obs.get('width')} with {obs.get('frame_stack')} frames "
+                     "(paper 84x84, 4)")
         parts.append(f"tested with the `{config.get('eval', {}).get('checkpoint', 'final')}` checkpoint "
                      "(paper: the final network)")
     if "n_episodes" in evals and not evals.empty:

@@ -122,7 +122,8 @@ _ARMS: dict[str, list[str]] = {
     "r20_enriched": R20_ALL + ["model.streams.hgm=enriched"],
     # The enriched HGM's best.pt met the bar on 3 of 5 seeds at 80k steps with 0.04 collisions per
     # episode (docs/study.md section 10), missing on return, not safety; 160k steps gave r20_all's
-    # validation a second chance at a good checkpoint (section 9). The next arm, on seeds 100 and 103 first.
+    # validation a second chance at a good checkpoint (section 9). Section 11: best.pt met the bar on 4 of
+    # 5 seeds (248 [219, 277], 0.09 collisions); with model=proposed_enriched it is experiment=quick160.
     "r20_enriched_160k": R20_ALL + ["model.streams.hgm=enriched", "learner.total_steps=160000"],
     # What the camera shows: the r20_all host's crashes are mostly lane changes into slow unconnected
     # cars just ahead in the next lane, which only the camera shows (docs/study.md section 9); at

@@ -17,7 +17,8 @@ BUNDLE = REPO_ROOT / "docs" / "results"
 # The narrative's row labels and the models they stand for.
 ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (camera + V2X list)": "coordinate",
         "Human-driven host": "human", "IDM + MOBIL": "idm_mobil",
-        "IDM + MOBIL inside the host's limits": "idm_mobil_limits"}
+        "IDM + MOBIL inside the host's limits": "idm_mobil_limits",
+        "Variant: enriched HGM, 160k steps (not the paper's)": "proposed_enriched"}
 
 
 def _evals() -> pd.DataFrame:
@@ -49,26 +50,36 @@ def test_the_narratives_test_table_is_the_bundles_to_the_digit():
                 assert abs(shown - exact) <= 0.5 + 1e-9, (label, scenario, cell, exact)
 
 
+# The sentences that quote scenario 3 seed by seed, and the model each quotes.
+PER_SEED_SENTENCES = {"Per seed": "proposed", "Variant per seed": "proposed_enriched"}
+
+
 @pytest.mark.skipif(not (BUNDLE / "evals.csv").is_file(), reason="no committed results bundle")
-def test_the_scenario_3_seeds_the_narrative_quotes_are_the_bundles():
+@pytest.mark.parametrize("opening", sorted(PER_SEED_SENTENCES))
+def test_the_scenario_3_seeds_the_narrative_quotes_are_the_bundles(opening: str):
+    model = PER_SEED_SENTENCES[opening]
     evals = _evals()
     s3 = evals[evals["scenario"] == "3"].set_index(["model", "seed"])
     text = " ".join(NARRATIVE.read_text().split())
-    quoted = re.search(r"Per seed: ([\d, ]+) against ([\d, ]+), with ([\d., ]+) collisions", text)
-    assert quoted, "the narrative's per-seed sentence for scenario 3 is gone"
+    quoted = re.search(rf"(?<![A-Za-z]){opening}: ([\d, ]+) against ([\d, ]+), with ([\d., ]+) collisions", text)
+    assert quoted, f"the narrative's sentence '{opening}: ...' for scenario 3 is gone"
     returns, human, collisions = ([float(x) for x in g.replace(",", " ").split()] for g in quoted.groups())
     for seed in range(5):
-        assert abs(returns[seed] - s3.loc[("proposed", seed), "episode_return"]) <= 0.5
+        assert abs(returns[seed] - s3.loc[(model, seed), "episode_return"]) <= 0.5
         assert abs(human[seed] - s3.loc[("human", seed), "episode_return"]) <= 0.5
-        assert abs(collisions[seed] - s3.loc[("proposed", seed), "collisions"]) <= 0.005 + 1e-9
+        assert abs(collisions[seed] - s3.loc[(model, seed), "collisions"]) <= 0.005 + 1e-9
 
 
 STUDY = REPO_ROOT / "docs" / "study.md"
-STUDY_TABLE = REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md"
+# Each study section whose table the study report wrote, and the report's file.
+STUDY_TABLES = {"10": REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md",
+                "11": REPO_ROOT / "docs" / "study" / "r20_enriched_160k" / "learner_study_table.md"}
 
 
-@pytest.mark.skipif(not STUDY_TABLE.is_file(), reason="no committed study table")
-def test_study_section_10s_table_is_the_one_the_study_report_wrote():
-    section = STUDY.read_text().split("## 10. ", 1)[1].split("\n## ", 1)[0]
-    table = STUDY_TABLE.read_text().strip()
-    assert table in section, "docs/study.md section 10's table differs from docs/study/r20_arms/learner_study_table.md"
+@pytest.mark.parametrize("section", sorted(STUDY_TABLES))
+def test_a_study_sections_table_is_the_one_the_study_report_wrote(section: str):
+    path = STUDY_TABLES[section]
+    if not path.is_file():
+        pytest.skip(f"no committed study table {path.name} for section {section}")
+    text = STUDY.read_text().split(f"\n## {section}. ", 1)[1].split("\n## ", 1)[0]
+    assert path.read_text().strip() in text, f"docs/study.md section {section}'s table differs from {path}"

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from analysis.claims import (
@@ -13,6 +14,7 @@ from analysis.claims import (
     evaluate_claims,
     judge,
 )
+from analysis.curves import fluctuation_values
 from analysis.stats import (
     Estimate,
     difference_ci,
@@ -67,6 +69,30 @@ def test_missing_method_makes_its_claims_inconclusive() -> None:
     verdicts = _verdicts(SyntheticSpec(seeds=FIVE, models=("proposed", "min", "coordinate")))
     assert verdicts[1] == INCONCLUSIVE  # no human-driven host
     assert verdicts[7] == SUPPORTED
+
+
+def test_a_variant_trained_longer_moves_no_claim() -> None:
+    # A variant beside the grid (another name, twice the steps, curves of its own) is tabled and drawn,
+    # never judged: every claim's evidence stays the same to the digit (claim 4 once moved, because
+    # its curves were binned on a grid as long as the longest run of any model).
+    spec = SyntheticSpec(seeds=FIVE)
+    evals, curves, _ = synthetic_frames(spec)
+    v_evals, v_curves, _ = synthetic_frames(SyntheticSpec(seeds=FIVE, models=("proposed",),
+                                                          total_steps=2 * spec.total_steps, rng_seed=3))
+    v_evals, v_curves = (f.assign(model="proposed_enriched", run_id="v" + f["run_id"].astype(str))
+                         for f in (v_evals, v_curves))
+    alone = evaluate_claims(evals, curves)
+    beside = evaluate_claims(pd.concat([evals, v_evals]), pd.concat([curves, v_curves]))
+    assert [(r.verdict, [c.text() for c in r.comparisons]) for r in beside] == \
+        [(r.verdict, [c.text() for c in r.comparisons]) for r in alone]
+
+
+def test_fluctuation_of_a_run_does_not_depend_on_other_models_runs() -> None:
+    _, curves, _ = synthetic_frames(SyntheticSpec(seeds=(0, 1), models=("proposed", "min")))
+    longer = curves[curves["model"] == "min"].assign(model="other", step=lambda f: f["step"] * 3)
+    alone = fluctuation_values(curves, "overtakes")
+    beside = fluctuation_values(pd.concat([curves, longer]), "overtakes")
+    pd.testing.assert_frame_equal(beside[beside["model"] != "other"].reset_index(drop=True), alone)
 
 
 def test_judge_rule() -> None:

@@ -32,6 +32,9 @@ def test_distinct_models_are_all_kept() -> None:
         assert len(getattr(both, name)) == len(getattr(grid, name)) + len(getattr(variant, name)), name
     assert set(both.configs) == {"proposed", "min", "human", "proposed_enriched"}
     assert both.dropped == [] and both.source == "grid + variant"
+    assert both.tracking_uri == "sqlite:////grid/mlflow.db; sqlite:////variant/mlflow.db"
+    # Combined again with one of its own sources: no source is named twice.
+    assert combine([both, variant]).tracking_uri == both.tracking_uri
     assert both.git_commits == ["grid", "variant"]
     # The test table reads the variant as one more method, its cells unchanged by the company it keeps.
     summary = tables.summary(both.evals)

@@ -36,6 +36,15 @@ def test_scale_states_ours_beside_the_papers() -> None:
     assert scale_text({}, pd.DataFrame()) == "scale unknown: the runs logged no config."
 
 
+def test_scale_names_a_model_trained_at_another_budget() -> None:
+    variant = SMOKE_CONFIG.replace("smoke", "quick160").replace("256", "160000")
+    human = "experiment: {name: smoke}\nmodel: {learned: false}\n"
+    text = scale_text({"proposed": SMOKE_CONFIG, "proposed_enriched": variant, "human": human}, pd.DataFrame())
+    assert text.startswith("preset `quick160, smoke`: 256 training steps per seed, Variant: enriched HGM 160,000 "
+                           "(paper 1,000,000)")
+    assert "Variant" not in scale_text({"proposed": SMOKE_CONFIG, "human": human}, pd.DataFrame())
+
+
 def test_claims_are_listed_by_number_never_as_a_count() -> None:
     claims = _claims()
     assert claim_numbers(claims, SUPPORTED) == "claim 7"
