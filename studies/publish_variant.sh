@@ -4,8 +4,9 @@
 # (conf/grid/paper.yaml), in a store of its own; then its runs are read into the grid's bundle beside the
 # paper's models and the report is rebuilt. No claim reads a variant: the report tables and draws it.
 #
-#   bash studies/publish_variant.sh MODEL [extra Hydra overrides, e.g. learner.total_steps=160000]
-#   bash studies/publish_variant.sh proposed_enriched "scenario='3'"   # one scenario first
+#   bash studies/publish_variant.sh MODEL [extra Hydra overrides]
+#   bash studies/publish_variant.sh proposed_enriched experiment=quick160   # what docs/results holds
+#   bash studies/publish_variant.sh proposed_enriched experiment=quick160 "scenario='3'"   # one scenario first
 #
 # Resumable as publish_results.sh is: run again, it reuses finished trainings and evaluations. Published
 # again, the variant's runs replace its earlier ones in docs/results/ (the grid's models stay as they are).
