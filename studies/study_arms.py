@@ -125,6 +125,10 @@ _ARMS: dict[str, list[str]] = {
     # validation a second chance at a good checkpoint (section 9). Section 11: best.pt met the bar on 4 of
     # 5 seeds (248 [219, 277], 0.09 collisions); with model=proposed_enriched it is experiment=quick160.
     "r20_enriched_160k": R20_ALL + ["model.streams.hgm=enriched", "learner.total_steps=160000"],
+    # Issue 20's comparison methods on that preset (experiment=quick160): Min's image-only network and
+    # the Coordinate network, whose streams have no HGM to enrich, trained with the same learner and budget.
+    "r20_min_160k": R20_ALL + ["model=min", "learner.total_steps=160000"],
+    "r20_coordinate_160k": R20_ALL + ["model=coordinate", "learner.total_steps=160000"],
     # What the camera shows: the r20_all host's crashes are mostly lane changes into slow unconnected
     # cars just ahead in the next lane, which only the camera shows (docs/study.md section 9); at
     # 36x36 such a car sits at the image's edge as a few pixels. The paper's 84x84 with 4 frames.
