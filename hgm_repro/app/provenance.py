@@ -12,10 +12,15 @@ from pathlib import Path
 from ..contracts.conf_dir import PACKAGE_ROOT
 
 SOURCE_NAME = "python -m hgm_repro"
+# Tracked folders whose edits cannot change a run: documentation and the published results.
+DOCS_NOT_RUN = ("docs",)
 
 
 def git_info(repo_root: Path = PACKAGE_ROOT.parent) -> tuple[str, str]:
-    """(commit, dirty) of the code that runs; ('unknown', 'unknown') outside a checkout."""
+    """(commit, dirty) of the code that runs; ('unknown', 'unknown') outside a checkout.
+
+    `dirty` ignores tracked changes under DOCS_NOT_RUN: the publish scripts rewrite docs/results in the
+    checkout they run from, which never changes what runs, and used to flag every later run dirty."""
 
     def git(*args: str) -> str:
         return subprocess.run(
@@ -24,7 +29,9 @@ def git_info(repo_root: Path = PACKAGE_ROOT.parent) -> tuple[str, str]:
 
     try:
         commit = git("rev-parse", "HEAD")
-        dirty = "true" if git("status", "--porcelain", "--untracked-files=no") else "false"
+        changed = git("status", "--porcelain", "--untracked-files=no", "--", ".",
+                      *(f":(exclude){d}" for d in DOCS_NOT_RUN))
+        dirty = "true" if changed else "false"
         return commit, dirty
     except (OSError, subprocess.SubprocessError):
         return "unknown", "unknown"

@@ -120,6 +120,26 @@ def test_git_info_outside_a_checkout(tmp_path: Path) -> None:
     assert git_info(tmp_path) == ("unknown", "unknown")
 
 
+def test_git_dirty_ignores_docs_but_not_code(tmp_path: Path) -> None:
+    # A publish script rewrites docs/results in the checkout it runs from; that must not flag the runs
+    # after it dirty, while an edit to code (or to docs and code together) must.
+    def git(*args: str) -> None:
+        subprocess.run(["git", "-C", str(tmp_path), *args], check=True, capture_output=True)
+
+    git("init", "-q")
+    (tmp_path / "docs" / "results").mkdir(parents=True)
+    (tmp_path / "docs" / "results" / "evals.csv").write_text("a\n")
+    (tmp_path / "hgm.py").write_text("x = 1\n")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "init")
+    commit, dirty = git_info(tmp_path)
+    assert len(commit) == 40 and dirty == "false"
+    (tmp_path / "docs" / "results" / "evals.csv").write_text("b\n")
+    assert git_info(tmp_path)[1] == "false"
+    (tmp_path / "hgm.py").write_text("x = 2\n")
+    assert git_info(tmp_path)[1] == "true"
+
+
 def test_store_is_absolute_under_the_launch_dir(tmp_path: Path) -> None:
     loc = resolve_location(make_cfg().tracking, tmp_path)
     assert loc.tracking_uri == f"sqlite:///{tmp_path.resolve()}/mlflow.db"
