@@ -12,7 +12,7 @@ from analysis.claims import ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
 from analysis.report import fmt_estimate
 from analysis.scale import is_smoke, scale_text
-from analysis.tables import PAPER_TABLE6, SAFE_COLLISIONS, beating_grid
+from analysis.tables import CLOSE_NOTE, PAPER_TABLE6, SAFE_COLLISIONS, beating_grid
 
 # The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
 SIDE_METRICS = ("collisions", "avg_speed_kmh", "dangerous_actions")
@@ -53,6 +53,8 @@ def beating_lines(beating: pd.DataFrame, scenarios: list[str]) -> list[str]:
              "|---|" + "---:|" * len(grid.columns)]
     for model, row in grid.iterrows():
         lines.append(f"| {model_label(model, short=True)} | " + " | ".join(row) + " |")
+    if "close" in beating:
+        lines += ["", CLOSE_NOTE]
     return [*lines, ""]
 
 

@@ -200,10 +200,15 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     scalars, vtypes, env_source = _environment(data.runs)
 
     csvs = tables.write_csvs(summary, out_dir)
-    beating = tables.seeds_beating(evals, scenarios=scenarios)
+    beating = tables.seeds_beating(evals, scenarios=scenarios, episodes=data.episodes)
     beating_csv = out_dir / "seeds_beating_human.csv"
     beating.to_csv(beating_csv, index=False)
     csvs.append(beating_csv)
+    margins = tables.seed_margins(evals, data.episodes)
+    if not margins.empty:
+        margins_csv = out_dir / "seed_margins_vs_human.csv"
+        margins.to_csv(margins_csv, index=False, float_format="%.6g")
+        csvs.append(margins_csv)
     claims_csv = out_dir / "claims.csv"
     claims_table(results).to_csv(claims_csv, index=False)
     csvs.append(claims_csv)

@@ -16,7 +16,7 @@ from PIL import Image
 from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
 from analysis.scenarios import PAPER_CV_RATIO
-from analysis.tables import SAFE_COLLISIONS
+from analysis.tables import CLOSE_NOTE, SAFE_COLLISIONS
 
 # matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
 # latin-1 core fonts.
@@ -357,6 +357,8 @@ def _test_section(w: ReportWriter, inp: ReportInputs) -> None:
         frame.index = [model_label(m, short=True) for m in frame.index]
         frame.columns = [f"Scenario {c}" if c in SCENARIOS else str(c) for c in frame.columns]
         w.frame_table(frame, "Method", size=8, first_width=1.3)
+        if frame.apply(lambda col: col.str.contains("close")).any().any():
+            w.para(CLOSE_NOTE, size=8)
     if "fig_test_results" in inp.figures:
         w.image(inp.figures["fig_test_results"], caption="Every test metric per scenario: mean over seeds and "
                 "95 % bootstrap CI; scenario k has CV ratio (k-1)/4.")

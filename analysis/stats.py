@@ -120,6 +120,16 @@ def difference_ci(a: Mapping[str, Sequence[float]], b: Mapping[str, Sequence[flo
     return bootstrap([a[x] for x in keys] + [b[x] for x in keys], stat, **kw)
 
 
+def test_noise_ci(a_episodes: Sequence[float] | np.ndarray, b_episodes: Sequence[float] | np.ndarray,
+                  **kw: float) -> Estimate:
+    """mean(a) - mean(b) for two hosts tested on one seed, with a bootstrap over their test episodes.
+
+    Not a CI of a method (that is over seeds, above): it says how far a longer test of the same two
+    networks in the same traffic could move the difference, i.e. whether one seed's comparison is
+    decided by the hosts or by which episodes the test happened to draw."""
+    return bootstrap([a_episodes, b_episodes], lambda s: s[0].mean(axis=1) - s[1].mean(axis=1), **kw)
+
+
 def _prob_greater(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     # Mann-Whitney style: ties count half, so two identical methods score exactly 0.5.
     gt = (x[:, :, None] > y[:, None, :]).mean(axis=(1, 2))

@@ -9,7 +9,7 @@ import pandas as pd
 
 from analysis.labels import fmt, model_label, ordered_models, ordered_scenarios
 from analysis.load import EVAL_METRICS
-from analysis.stats import Estimate, iqm_ci, mean_ci, probability_of_improvement, stratified_mean_ci
+from analysis.stats import Estimate, iqm_ci, mean_ci, probability_of_improvement, stratified_mean_ci, test_noise_ci
 
 # The paper's Table 6 (test score per scenario; the paper does not name the unit).
 PAPER_TABLE6 = pd.DataFrame(
@@ -96,36 +96,76 @@ def aggregate(evals: pd.DataFrame, metric: str, scenarios: list[str],
 # more test return than that seed's human-driven host in the same scenario, with under this many
 # collisions per episode (the human-driven host, under its safety layer, has none).
 SAFE_COLLISIONS = 0.2
+# What '(c close)' in a cell of the seed-by-seed comparison means.
+CLOSE_NOTE = (f"(c close): on c of those seeds the host is safe (under {SAFE_COLLISIONS:g} collisions per "
+              "episode) and its return margin over the human-driven host lies inside the test's own noise (its 95% "
+              "bootstrap interval over the two hosts' test episodes covers zero), so a longer test of the same "
+              "networks could decide them either way; per seed in seed_margins_vs_human.csv.")
 
 
-def seeds_beating(evals: pd.DataFrame, reference: str = "human", scenarios: list[str] | None = None,
-                  max_collisions: float = SAFE_COLLISIONS) -> pd.DataFrame:
-    """Long table, one row per (model, scenario) other than `reference`'s: `seeds`, those on which both the
-    model and `reference` were tested, and `beating`, those on which the model's test return exceeds the
-    reference's with under `max_collisions` collisions per episode. Empty without the reference."""
-    columns = ["model", "scenario", "seeds", "beating"]
+def seed_margins(evals: pd.DataFrame, episodes: pd.DataFrame | None = None, reference: str = "human",
+                 max_collisions: float = SAFE_COLLISIONS) -> pd.DataFrame:
+    """One row per (model, scenario, seed) that `reference` was tested on too: the model's test return
+    and collisions, the reference's return, `margin` (their difference), `beating` (more return with
+    under `max_collisions` collisions per episode) and, from `episodes` (one row per test episode), the
+    margin's 95% test-noise interval `margin_low`/`margin_high` and `close`: the host is safe and the
+    interval covers zero, so a longer test of the same networks could turn that seed's verdict either way.
+    Empty without the reference."""
+    columns = ["model", "scenario", "seed", "episode_return", "collisions", "ref_return", "margin",
+               "margin_low", "margin_high", "beating", "close"]
     needed = {"model", "scenario", "seed", "episode_return", "collisions"}
     if evals.empty or not needed <= set(evals) or reference not in set(evals["model"]):
         return pd.DataFrame(columns=columns)
     cells = evals.groupby(["model", "scenario", "seed"])[["episode_return", "collisions"]].mean().reset_index()
+    cells["scenario"] = cells["scenario"].astype(str)
     ref = cells[cells["model"] == reference].rename(columns={"episode_return": "ref_return"})
     paired = cells[cells["model"] != reference].merge(ref[["scenario", "seed", "ref_return"]], on=["scenario", "seed"])
-    paired["beating"] = (paired["episode_return"] > paired["ref_return"]) & (paired["collisions"] < max_collisions)
-    out = paired.groupby(["model", "scenario"]).agg(seeds=("seed", "nunique"), beating=("beating", "sum")).reset_index()
-    out["scenario"] = out["scenario"].astype(str)
+    paired["margin"] = paired["episode_return"] - paired["ref_return"]
+    paired["beating"] = (paired["margin"] > 0) & (paired["collisions"] < max_collisions)
+    paired["margin_low"] = paired["margin_high"] = np.nan
+    if episodes is not None and not episodes.empty and needed <= set(episodes):
+        eps = episodes.assign(scenario=episodes["scenario"].astype(str))
+        returns = {key: g["episode_return"].to_numpy(float) for key, g in eps.groupby(["model", "scenario", "seed"])}
+        for i, row in paired.iterrows():
+            mine = returns.get((row["model"], row["scenario"], row["seed"]))
+            theirs = returns.get((reference, row["scenario"], row["seed"]))
+            if mine is not None and theirs is not None:
+                est = test_noise_ci(mine, theirs)
+                paired.loc[i, ["margin_low", "margin_high"]] = [est.low, est.high]
+    # Only a safe seed's verdict turns on its return, so only there can the test's noise on the return decide it.
+    inside = (paired["margin_low"] <= 0) & (paired["margin_high"] >= 0)
+    paired["close"] = (paired["collisions"] < max_collisions) & inside
+    order = {m: i for i, m in enumerate(ordered_models(paired["model"]))}
+    paired = paired.sort_values(["model", "scenario", "seed"],
+                                key=lambda c: c.map(order) if c.name == "model" else c)
+    return paired[columns].reset_index(drop=True)
+
+
+def seeds_beating(evals: pd.DataFrame, reference: str = "human", scenarios: list[str] | None = None,
+                  max_collisions: float = SAFE_COLLISIONS, episodes: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Long table, one row per (model, scenario) other than `reference`'s: `seeds`, those on which both the
+    model and `reference` were tested, and `beating`, those on which the model's test return exceeds the
+    reference's with under `max_collisions` collisions per episode. Empty without the reference. With
+    `episodes`, also `close`: the seeds whose return margin lies inside the test's noise (`seed_margins`)."""
+    margins = seed_margins(evals, episodes, reference, max_collisions)
+    columns = ["model", "scenario", "seeds", "beating"] + (["close"] if episodes is not None else [])
+    if margins.empty:
+        return pd.DataFrame(columns=columns)
+    out = margins.groupby(["model", "scenario"], sort=False).agg(
+        seeds=("seed", "nunique"), beating=("beating", "sum"), close=("close", "sum")).reset_index()
     if scenarios is not None:
         out = out[out["scenario"].isin(scenarios)]
-    order = {m: i for i, m in enumerate(ordered_models(out["model"]))}
-    out = out.sort_values(["model", "scenario"], key=lambda c: c.map(order) if c.name == "model" else c)
-    return out[columns].astype({"seeds": int, "beating": int}).reset_index(drop=True)
+    return out[columns].astype({c: int for c in columns[2:]}).reset_index(drop=True)
 
 
 def beating_grid(beating: pd.DataFrame, scenarios: list[str]) -> pd.DataFrame:
-    """Method x scenario cells 'k of n' from `seeds_beating`; '-' where a cell has no paired seed."""
+    """Method x scenario cells 'k of n' from `seeds_beating`, with '(c close)' where c of those seeds' return
+    margins lie inside the test's noise; '-' where a cell has no paired seed."""
     grid = pd.DataFrame("-", index=pd.Index(ordered_models(beating["model"]), name="model"), columns=scenarios)
     for row in beating.itertuples(index=False):
         if row.scenario in scenarios:
-            grid.loc[row.model, row.scenario] = f"{row.beating} of {row.seeds}"
+            close = getattr(row, "close", 0)
+            grid.loc[row.model, row.scenario] = f"{row.beating} of {row.seeds}" + (f" ({close} close)" if close else "")
     return grid
 
 

@@ -70,6 +70,23 @@ def test_the_scenario_3_seeds_the_narrative_quotes_are_the_bundles(opening: str)
         assert abs(collisions[seed] - s3.loc[(model, seed), "collisions"]) <= 0.005 + 1e-9
 
 
+@pytest.mark.skipif(not (BUNDLE / "episodes.csv").is_file(), reason="no committed results bundle")
+def test_the_variants_test_noise_margins_are_the_bundles():
+    from analysis.tables import seed_margins
+
+    episodes = pd.read_csv(BUNDLE / "episodes.csv", dtype={"scenario": str})
+    margins = seed_margins(_evals(), episodes)
+    mine = margins[(margins["model"] == "proposed_enriched") & (margins["scenario"] == "3")].set_index("seed")
+    text = " ".join(NARRATIVE.read_text().split())
+    quoted = re.search(r"variant margins on seeds 0-3: ((?:-?\d+ \[-?\d+, -?\d+\](?:, )?){4})", text)
+    assert quoted, "the narrative's test-noise margins of the variant are gone"
+    cells = re.findall(r"(-?\d+) \[(-?\d+), (-?\d+)\]", quoted.group(1))
+    for seed, cell in enumerate(cells):
+        want = mine.loc[seed, ["margin", "margin_low", "margin_high"]].to_numpy(float)
+        assert all(abs(float(x) - w) <= 0.5 + 1e-9 for x, w in zip(cell, want, strict=True)), (seed, cell, want)
+    assert f"({int(mine['close'].sum())} close)" in text
+
+
 STUDY = REPO_ROOT / "docs" / "study.md"
 # Each study section whose table the study report wrote, and the report's file.
 STUDY_TABLES = {"10": REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md",
