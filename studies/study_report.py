@@ -16,7 +16,7 @@ import yaml  # noqa: E402
 from hydra import compose, initialize_config_dir  # noqa: E402
 from matplotlib.ticker import FuncFormatter  # noqa: E402
 from mlflow import MlflowClient  # noqa: E402
-from omegaconf import OmegaConf  # noqa: E402
+from omegaconf import DictConfig, OmegaConf  # noqa: E402
 from study_arms import ARMS, ROOT, STUDY_REFERENCES  # noqa: E402
 
 from analysis.stats import iqm_ci, mean_ci  # noqa: E402
@@ -38,16 +38,22 @@ def _value(text: object) -> object:
 
 
 def arm_signatures() -> dict[str, dict[str, object]]:
-    """arm -> the value of every key any arm overrides (the quick preset's value where it does not).
+    """arm -> the value, in that arm's own config, of every key any arm overrides.
 
     Runs are matched on these values rather than on their train_key, so that runs made before a
-    config field existed (the field's absence means its default) still count."""
+    config field existed (the field's absence means its default) still count. Each arm's config is
+    composed whole, because an arm that chooses another model (model=min) also changes the keys it
+    does not name (min's `model.streams.hgm` is none); a config group is read by its choice's name."""
     keys = sorted({o.split("=", 1)[0] for overrides in ARMS.values() for o in overrides})
     with initialize_config_dir(config_dir=str(ROOT / "conf"), version_base="1.3"):
-        defaults = compose("config", overrides=["experiment=quick"])
-    base = {k: _value(OmegaConf.select(defaults, k)) for k in keys}
-    return {arm: {**base, **{o.split("=", 1)[0]: _value(o.split("=", 1)[1]) for o in overrides}}
-            for arm, overrides in ARMS.items()}
+        configs = {arm: compose("config", overrides=["experiment=quick", *overrides])
+                   for arm, overrides in ARMS.items()}
+    return {arm: {k: _value(_chosen(cfg, k)) for k in keys} for arm, cfg in configs.items()}
+
+
+def _chosen(cfg: DictConfig, key: str) -> object:
+    node = OmegaConf.select(cfg, key)
+    return node.get("name") if isinstance(node, DictConfig) else node
 
 
 def _steps_axis(ax: plt.Axes) -> None:
@@ -88,8 +94,9 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                 continue
             model = tags.get("model")
             params = {current_key(k): v for k, v in r.data.params.items()}  # stores of before issue 21 too
+            params["model"] = model  # the model is a tag, not a param; arms that choose one are matched on it
             arm = model if model in STUDY_REFERENCES else _arm_of(params, signatures)
-            if arm is None or model not in ("proposed", *STUDY_REFERENCES):
+            if arm is None:
                 continue
             seed = int(tags["seed"])
             if tags.get("stage") == "eval":

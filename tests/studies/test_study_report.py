@@ -53,3 +53,15 @@ def test_an_earlier_row_fills_only_the_seeds_the_store_lacks(tmp_path):
     per_seed = pd.read_csv(tmp_path / "out" / "learner_study_per_seed.csv").set_index(["arm", "seed"])
     assert per_seed.loc[("r20_all", 100), "episode_return"] == 99
     assert list(per_seed.loc["r20_all"]["episode_return"]) == [99, 20, 30]
+
+
+def test_an_arm_that_chooses_another_model_is_matched_on_that_model_and_its_own_config():
+    # r20_min_160k names only model=min; Min's config also turns the HGM stream off, which the run logs
+    signatures = study_report.arm_signatures()
+    min_arm = signatures["r20_min_160k"]
+    assert min_arm["model"] == "min" and min_arm["model.streams.hgm"] == "none"
+    assert signatures["r20_all"]["model"] == "proposed"
+    run = {key: str(value) for key, value in min_arm.items()}
+    assert study_report._arm_of(run, signatures) == "r20_min_160k"
+    assert study_report._arm_of({**run, "model": "coordinate"}, signatures) == "r20_coordinate_160k"
+    assert study_report._arm_of({**run, "model": "proposed"}, signatures) is None  # its HGM is on
