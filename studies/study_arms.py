@@ -127,6 +127,7 @@ _ARMS: dict[str, list[str]] = {
     "r20_enriched_160k": R20_ALL + ["model.streams.hgm=enriched", "learner.total_steps=160000"],
     # Issue 20's comparison methods on that preset (experiment=quick160): Min's image-only network and
     # the Coordinate network, whose streams have no HGM to enrich, trained with the same learner and budget.
+    # Section 12: neither became safe (best.pt 0.44 and 0.39 collisions per episode; bar 0 and 1 of 5).
     "r20_min_160k": R20_ALL + ["model=min", "learner.total_steps=160000"],
     "r20_coordinate_160k": R20_ALL + ["model=coordinate", "learner.total_steps=160000"],
     # What the camera shows: the r20_all host's crashes are mostly lane changes into slow unconnected
