@@ -101,3 +101,28 @@ def test_a_study_sections_table_is_the_one_the_study_report_wrote(section: str):
         pytest.skip(f"no committed study table {path.name} for section {section}")
     text = STUDY.read_text().split(f"\n## {section}. ", 1)[1].split("\n## ", 1)[0]
     assert path.read_text().strip() in text, f"docs/study.md section {section}'s table differs from {path}"
+
+
+TEST_LENGTH = REPO_ROOT / "docs" / "study" / "test_length" / "margins.csv"
+
+
+@pytest.mark.skipif(not TEST_LENGTH.is_file(), reason="no committed test-length study")
+def test_the_test_length_sections_table_is_its_csv_and_its_short_test_is_the_published_one():
+    study = pd.read_csv(TEST_LENGTH)
+    mine = study[study["model"] == "proposed_enriched"]
+    text = STUDY.read_text().split("\n## 13. ", 1)[1].split("\n## ", 1)[0]
+
+    def cell(row: pd.Series) -> str:
+        return (f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], "
+                f"{row['collisions']:.2f}")
+
+    by_test = {test: part.set_index("seed") for test, part in mine.groupby("test")}
+    for seed in by_test["preset"].index:
+        assert f"| {seed} | {cell(by_test['preset'].loc[seed])} | {cell(by_test['long'].loc[seed])} |" in text, seed
+    # The re-test's first episodes are the preset's test: they must give the published numbers.
+    published = pd.read_csv(BUNDLE / "report" / "seed_margins_vs_human.csv", dtype={"scenario": str})
+    published = published[(published["model"] == "proposed_enriched") & (published["scenario"] == "3")]
+    both = by_test["preset"].join(published.set_index("seed"), rsuffix="_published", how="inner")
+    assert len(both) == len(by_test["preset"])
+    for column in ("episode_return", "ref_return", "collisions"):
+        assert (both[column] - both[f"{column}_published"]).abs().max() < 1e-3, column
