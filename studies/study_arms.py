@@ -130,6 +130,11 @@ _ARMS: dict[str, list[str]] = {
     # Section 12: neither became safe (best.pt 0.44 and 0.39 collisions per episode; bar 0 and 1 of 5).
     "r20_min_160k": R20_ALL + ["model=min", "learner.total_steps=160000"],
     "r20_coordinate_160k": R20_ALL + ["model=coordinate", "learner.total_steps=160000"],
+    # Their greedy validation peaked at 40-60k steps and then collapsed (section 12): a cooler step
+    # (lr 5e-5, half the preset's), the first of the tuning the proposed host had and they did not.
+    "r20_min_160k_lr5e5": R20_ALL + ["model=min", "learner.total_steps=160000", "learner.lr=0.00005"],
+    "r20_coordinate_160k_lr5e5": R20_ALL + ["model=coordinate", "learner.total_steps=160000",
+                                            "learner.lr=0.00005"],
     # What the camera shows: the r20_all host's crashes are mostly lane changes into slow unconnected
     # cars just ahead in the next lane, which only the camera shows (docs/study.md section 9); at
     # 36x36 such a car sits at the image's edge as a few pixels. The paper's 84x84 with 4 frames.
