@@ -40,13 +40,18 @@ def _command(arm: str, seed: int, uri: str, extra: list[str]) -> list[str]:
 BEST = ["eval.checkpoint=best"]
 # An arm that keeps a moving average of its weights is also tested from ema.pt (reported as ARM@ema).
 EMA = ["eval.checkpoint=ema"]
+# --reselected: the training keeps every validation pass's network (not part of the train_key, so the
+# arm trains exactly as without it), and the test of the one reselection chooses is ARM@reselected.
+KEEP_PASSES = ["eval.keep_val_checkpoints=true"]
+RESELECTED = [*KEEP_PASSES, "eval.checkpoint=reselected"]
 
 
 def run(arms: list[str], seeds: list[int], parallel: int, store: Path, also_best: bool = False,
-        references: bool = False) -> None:
+        references: bool = False, reselected: bool = False) -> None:
     store.parent.mkdir(parents=True, exist_ok=True)
     uri = f"sqlite:///{store.resolve()}"
-    queue: list[tuple[str, int, list[str]]] = [(a, s, []) for s in seeds for a in arms]
+    first = KEEP_PASSES if reselected else []
+    queue: list[tuple[str, int, list[str]]] = [(a, s, first) for s in seeds for a in arms]
     if references:
         queue += [(host, s, []) for s in seeds for host in STUDY_REFERENCES]
     running: list[tuple[subprocess.Popen, str, int, list[str]]] = []
@@ -63,10 +68,13 @@ def run(arms: list[str], seeds: list[int], parallel: int, store: Path, also_best
             if proc.poll() is not None:
                 running.remove(item)
                 print(f"finished {arm} seed {seed} {' '.join(extra)}: exit {proc.returncode}", flush=True)
-                if also_best and not extra and proc.returncode == 0 and arm in ARMS:
-                    queue.insert(0, (arm, seed, BEST))
-                    if any(o.startswith("learner.ema_decay=") for o in ARMS[arm]):
-                        queue.insert(0, (arm, seed, EMA))
+                if extra == first and proc.returncode == 0 and arm in ARMS:  # the training ran: other tests of it
+                    if also_best:
+                        queue.insert(0, (arm, seed, BEST))
+                        if any(o.startswith("learner.ema_decay=") for o in ARMS[arm]):
+                            queue.insert(0, (arm, seed, EMA))
+                    if reselected:
+                        queue.insert(0, (arm, seed, RESELECTED))
         time.sleep(5)
 
 
@@ -81,6 +89,9 @@ def main(argv: list[str] | None = None) -> None:
     r.add_argument("--also-best", action="store_true",
                    help="test each training's best validation checkpoint too (reported as ARM@best), and "
                         "ema.pt of arms that keep one (ARM@ema)")
+    r.add_argument("--reselected", action="store_true",
+                   help="keep every validation pass's network and test the one reselection chooses among the "
+                        "best of them on fresh validation traffic (reported as ARM@reselected; conf/eval)")
     r.add_argument("--references", action="store_true",
                    help=f"test the reference hosts ({', '.join(STUDY_REFERENCES)}) on the same seeds")
     rep = sub.add_parser("report", help="curves and final results from the store")
@@ -99,7 +110,7 @@ def main(argv: list[str] | None = None) -> None:
             p.error(f"seeds {bad} are the published results' seeds; tune on others (for example 100-104)")
         if not a.arms and not a.references:
             p.error("nothing to run: name --arms, or --references, or both")
-        run(a.arms, a.seeds, a.parallel, a.store, a.also_best, a.references)
+        run(a.arms, a.seeds, a.parallel, a.store, a.also_best, a.references, a.reselected)
     else:
         from study_report import earlier_results, report
 

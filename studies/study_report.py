@@ -100,10 +100,10 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                 continue
             seed = int(tags["seed"])
             if tags.get("stage") == "eval":
-                # A test of the best validation checkpoint (learner_study.py --also-best) is its own row;
+                # A test of another checkpoint (learner_study.py --also-best, --reselected) is its own row;
                 # a reference host has no checkpoint, whatever the preset names.
                 checkpoint = params.get("eval.checkpoint")
-                if arm not in STUDY_REFERENCES and checkpoint in ("best", "ema"):
+                if arm not in STUDY_REFERENCES and checkpoint in ("best", "ema", "reselected"):
                     arm = f"{arm}@{checkpoint}"
                 results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
             elif tags.get("stage") == "train":
@@ -187,7 +187,8 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
             row[f"{m}_iqm"], row[f"{m}_iqm_lo"], row[f"{m}_iqm_hi"] = est.point, est.low, est.high
         row["seeds_beating_human_under_0.2"] = _bar_count(grp, results)
         rows.append(row)
-    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema")], *STUDY_REFERENCES)
+    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema", f"{arm}@reselected")],
+                         *STUDY_REFERENCES)
              if a in set(results["arm"])]
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)

@@ -10,6 +10,7 @@ from `last.pt` instead of opening a second one.
 
 from __future__ import annotations
 
+import json
 import logging
 import os
 import signal
@@ -30,6 +31,9 @@ from ..contracts.checkpoint import (
     EMA_CHECKPOINT,
     FINAL_CHECKPOINT,
     LAST_CHECKPOINT,
+    RESELECTED_CHECKPOINT,
+    RESELECTION_RECORD,
+    VAL_CHECKPOINTS,
     CheckpointMismatchError,
     weights_file,
 )
@@ -386,8 +390,9 @@ def _training_description(job: JobConfig, key: str, checkpoint_dir: Path) -> str
 
 
 def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
-    """`eval.checkpoint`: the final network (the paper's protocol) or the one with the best
-    validation return, which training keeps as best.pt beside final.pt when validation is on."""
+    """`eval.checkpoint`: the final network (the paper's protocol), the one with the best validation
+    return, which training keeps as best.pt beside final.pt when validation is on, the moving average
+    (ema.pt), or reselected.pt, which the test chooses among the kept validation passes' networks."""
     which = job.eval.checkpoint
     if training.checkpoint is None or which == "final":
         return training.checkpoint
@@ -398,6 +403,14 @@ def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
                               f"beside {training.checkpoint}: it trained with learner.ema_decay=0. Evaluate the final "
                               "network (eval.checkpoint=final), or train again with learner.ema_decay=0.999.")
         return ema
+    if which == "reselected":
+        kept = training.checkpoint.parent / VAL_CHECKPOINTS
+        if not any(kept.glob("*.pt")):
+            raise ConfigError(
+                f"eval.checkpoint=reselected, but the training (run {training.run_id}) kept no validation pass's "
+                f"network in {kept}: it trained with eval.keep_val_checkpoints=false. Test its best.pt "
+                "(eval.checkpoint=best), or train again with eval.keep_val_checkpoints=true force_retrain=true.")
+        return training.checkpoint.with_name(RESELECTED_CHECKPOINT)  # chosen when the test runs (reselection.py)
     best = training.checkpoint.with_name(BEST_CHECKPOINT)
     if not best.is_file():
         raise ConfigError(
@@ -449,6 +462,12 @@ def evaluate_and_log(
     with _run_status(tracker, run_id):
         tracker.log_params(run_id, flatten(job.resolved))
         tracker.log_text(run_id, _config_yaml(job), "config.yaml")
+        if job.eval.checkpoint == "reselected" and checkpoint is not None:
+            from ..evaluation.reselection import reselect
+
+            checkpoint, record = reselect(job, checkpoint.parent)
+            tracker.log_text(run_id, json.dumps(record, indent=2), RESELECTION_RECORD)
+            tracker.set_tags(run_id, {"reselected_env_steps": record["chosen_env_steps"]})
         with tracker.system_metrics(run_id, job.tracking.system_metrics):
             result = evaluate_fn(job, job.scenario, checkpoint)
         means = {k: float(v) for k, v in result.means.items()}

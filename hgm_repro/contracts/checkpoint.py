@@ -23,13 +23,18 @@ CHECKPOINT_FORMAT = 1
 FINAL_CHECKPOINT = "final.pt"  # the network at the end of training: the paper's protocol tests this one
 BEST_CHECKPOINT = "best.pt"  # the network with the best validation return so far (validation on only)
 EMA_CHECKPOINT = "ema.pt"  # the exponential moving average of the online weights (learner.ema_decay > 0)
+# Every validation pass's network, VAL_CHECKPOINTS/<env steps>.pt (eval.keep_val_checkpoints), and the one
+# reselection chose among the best of them (eval.checkpoint=reselected), with its record beside it.
+VAL_CHECKPOINTS = "val"
+RESELECTED_CHECKPOINT = "reselected.pt"
+RESELECTION_RECORD = "reselection.json"
 LAST_CHECKPOINT = "last.pt"  # everything a resume needs, while training runs
 
 # What evaluation reads of a checkpoint: the network and the identity `check_compatible` checks.
 # best.pt and the logged artifacts hold only these; the optimiser and the replay memory (most of
 # a finished training's bytes) stay in final.pt alone.
 WEIGHTS_KEYS = ("format", "model", "train_key", "training_config", "finished", "env_steps", "updates",
-                "network", "best_val_return")
+                "network", "best_val_return", "val_return")
 
 # What a network's weights depend on: evaluation needs only these to match.
 ARCHITECTURE_KEYS = ("model.name", "model.network", "model.streams", "observation")
@@ -110,6 +115,11 @@ def save_final(state: dict[str, Any], checkpoint_dir: Path) -> Path:
     final = save_checkpoint(state, Path(checkpoint_dir) / FINAL_CHECKPOINT)
     (Path(checkpoint_dir) / LAST_CHECKPOINT).unlink(missing_ok=True)
     return final
+
+
+def val_checkpoint_path(checkpoint_dir: Path, env_steps: int) -> Path:
+    """Where a validation pass at `env_steps` keeps its network (zero-padded: the names sort by step)."""
+    return Path(checkpoint_dir) / VAL_CHECKPOINTS / f"{env_steps:09d}.pt"
 
 
 def weights_file(checkpoint: Path, directory: Path) -> Path:

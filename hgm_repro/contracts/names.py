@@ -32,6 +32,9 @@ VALIDATION_RETURN = "val/episode_return"
 EVAL_SEED_OFFSET = 100_000
 # Validation traffic: seeds that neither training (seed) nor testing (seed + EVAL_SEED_OFFSET) uses.
 VAL_SEED_OFFSET = 200_000
+# Reselection traffic (eval.checkpoint=reselected): the training traffic again, on seeds that neither
+# the validation passes whose best it re-checks nor any test uses, so that it does not re-count their luck.
+RESELECT_SEED_OFFSET = 300_000
 # A grouped member's exploration draws (its own generator, so that members do not share one stream).
 EXPLORATION_SEED_OFFSET = 500_000
 # Film a different episode than evaluation's first one, but the same one on every run of the job.

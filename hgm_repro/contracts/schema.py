@@ -142,12 +142,16 @@ class EvalSchema:
     """The test (decisions, envs, which checkpoint drives) and the validation passes during training
     that choose best.pt (conf/eval/default.yaml)."""
 
-    checkpoint: Literal["final", "best", "ema"]
+    checkpoint: Literal["final", "best", "ema", "reselected"]
     test_steps: int = field(metadata=ge(1))
     test_envs: int = field(metadata=ge(1))
     val_every: int = field(metadata=ge(0))
     val_envs: int = field(metadata=ge(1))
     val_episodes: int = field(metadata=ge(1))
+    keep_val_checkpoints: bool
+    reselect_top: int = field(metadata=ge(1))
+    reselect_envs: int = field(metadata=ge(1))
+    reselect_episodes: int = field(metadata=ge(1))
 
 
 @dataclass(frozen=True)
@@ -275,6 +279,13 @@ def _check_eval(evaluation: Any, model: Any, learner: Any, errors: list[str]) ->
         if not evaluation.val_every:
             errors.append("eval.checkpoint=best is not allowed with eval.val_every=0: without validation "
                           "training keeps no best.pt (set eval.val_every=N, or eval.checkpoint=final)")
+    if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "reselected" and learned:
+        if not evaluation.val_every or not evaluation.keep_val_checkpoints:
+            errors.append(f"eval.checkpoint=reselected is not allowed with eval.val_every={evaluation.val_every} "
+                          f"and eval.keep_val_checkpoints={str(evaluation.keep_val_checkpoints).lower()}: "
+                          "reselection re-checks the networks of the best validation passes, which training keeps "
+                          "only with both on (set eval.val_every=N eval.keep_val_checkpoints=true, or "
+                          "eval.checkpoint=best)")
     if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "ema" and learned:
         if isinstance(learner, LearnerSchema) and not learner.ema_decay:
             errors.append("eval.checkpoint=ema is not allowed with learner.ema_decay=0: training keeps no moving "

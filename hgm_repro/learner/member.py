@@ -29,6 +29,7 @@ from ..contracts.checkpoint import (
     recorded_training_config,
     save_checkpoint,
     save_final,
+    val_checkpoint_path,
     weights_only,
 )
 from ..contracts.names import TRAINING_CURVE_METRICS, VAL_SEED_OFFSET
@@ -241,6 +242,10 @@ class Member:
         episodes = run_episodes(self.val_env, self.actor, episodes_per_env, seed)
         self.net.train()
         metrics = episode_means(episodes, "val")
+        if self.job.eval.keep_val_checkpoints:  # each pass's network, for reselection (eval.checkpoint=reselected)
+            state = weights_only(self.checkpoint_state(finished=False, **progress))
+            save_checkpoint({**state, "val_return": metrics["val/episode_return"]},
+                            val_checkpoint_path(self.checkpoint_dir, progress["env_steps"]))
         if metrics["val/episode_return"] > self.best_val:
             self.best_val = metrics["val/episode_return"]
             best = weights_only(self.checkpoint_state(finished=False, **progress))  # best.pt is for its weights

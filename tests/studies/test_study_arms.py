@@ -30,3 +30,20 @@ def test_every_arm_composes_and_validates_on_the_quick_preset(arm: str) -> None:
             assert node.get("name") == value, (arm, override, node.get("name"))
             continue
         assert str(node).lower() == value.lower() or float(node) == float(value), (arm, override, node)
+
+
+def test_the_reselected_test_trains_exactly_as_the_arm_and_tests_the_reselected_network() -> None:
+    from learner_study import KEEP_PASSES, RESELECTED, _command
+
+    from hgm_repro.contracts.train_key import train_key
+
+    def job(extra: list[str]):
+        overrides = _command("r20_enriched_160k", 100, "sqlite:///x.db", extra)[3:]  # after python -m hgm_repro
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            return validate(compose("config", overrides=overrides))
+
+    plain, keeping, reselected = job([]), job(KEEP_PASSES), job(RESELECTED)
+    assert train_key(plain) == train_key(keeping) == train_key(reselected)  # one training, as section 11's
+    assert plain.eval.checkpoint == "final"  # the study's first test; the quick preset keeps the passes anyway
+    assert (keeping.eval.checkpoint, keeping.eval.keep_val_checkpoints) == ("final", True)
+    assert (reselected.eval.checkpoint, reselected.eval.keep_val_checkpoints) == ("reselected", True)
