@@ -132,6 +132,7 @@ _ARMS: dict[str, list[str]] = {
     "r20_coordinate_160k": R20_ALL + ["model=coordinate", "learner.total_steps=160000"],
     # Their greedy validation peaked at 40-60k steps and then collapsed (section 12): a cooler step
     # (lr 5e-5, half the preset's), the first of the tuning the proposed host had and they did not.
+    # Probed on seed 101 only (section 12): Min still collapsed after 40k steps, Coordinate barely learned.
     "r20_min_160k_lr5e5": R20_ALL + ["model=min", "learner.total_steps=160000", "learner.lr=0.00005"],
     "r20_coordinate_160k_lr5e5": R20_ALL + ["model=coordinate", "learner.total_steps=160000",
                                             "learner.lr=0.00005"],
