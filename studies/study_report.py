@@ -105,13 +105,17 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                 checkpoint = params.get("eval.checkpoint")
                 if arm not in STUDY_REFERENCES and checkpoint in ("best", "ema", "reselected"):
                     arm = f"{arm}@{checkpoint}"
-                results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS}})
+                results.append({"arm": arm, "seed": seed, **{m: r.data.metrics.get(f"eval/{m}") for m in RESULTS},
+                                "evaluation_version": int(tags.get("evaluation_version", 1))})
             elif tags.get("stage") == "train":
                 for m in (*CURVES, EMA_CURVE):
                     for point in client.get_metric_history(r.info.run_id, m):
                         curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step,
                                        "value": point.value})
-    return (pd.DataFrame(results, columns=["arm", "seed", *RESULTS]),
+    # A test made again after the evaluation fix (version 2: no blank frames) replaces the one before it.
+    tests = pd.DataFrame(results, columns=["arm", "seed", *RESULTS, "evaluation_version"])
+    tests = tests.sort_values("evaluation_version", ascending=False, kind="stable")
+    return (tests.drop_duplicates(["arm", "seed"]).drop(columns="evaluation_version"),
             pd.DataFrame(curves, columns=["arm", "seed", "metric", "step", "value"]))
 
 

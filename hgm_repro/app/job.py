@@ -35,6 +35,8 @@ from ..contracts.checkpoint import (
     RESELECTION_RECORD,
     VAL_CHECKPOINTS,
     CheckpointMismatchError,
+    chosen_by_current_validation,
+    load_checkpoint,
     weights_file,
 )
 from ..contracts.errors import BAD_INPUT_EXIT, ConfigError
@@ -42,7 +44,7 @@ from ..contracts.interrupts import JobInterrupted, acquire_stoppably, hand_on, s
 from ..contracts.names import VALIDATION_RETURN
 from ..contracts.schema import JobConfig, validate
 from ..contracts.simulator_config import ScenarioConfig
-from ..contracts.train_key import evaluation_key, train_key, training_config
+from ..contracts.train_key import EVALUATION_VERSION, evaluation_key, train_key, training_config
 from .provenance import git_info, launch_description, launch_tags
 from .store import (
     CURVES_VIEW,
@@ -418,6 +420,12 @@ def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
             f"{training.checkpoint}: it trained without validation (eval.val_every=0). Evaluate the final "
             "network (eval.checkpoint=final), or train again with validation "
             "(eval.val_every=N force_retrain=true).")
+    if not chosen_by_current_validation(load_checkpoint(best)):
+        raise ConfigError(
+            f"eval.checkpoint=best, but {best} (run {training.run_id}) was chosen by the validation of before "
+            f"evaluation version {EVALUATION_VERSION}, which handed hosts blank frames whenever another env restarted "
+            "(hgm_repro.contracts.train_key). Test eval.checkpoint=final, or eval.checkpoint=reselected if the "
+            "training kept its passes, or train again (force_retrain=true).")
     return best
 
 
@@ -451,6 +459,7 @@ def evaluate_and_log(
         log.info("evaluation %s already finished in run %s: not repeated", key, done.info.run_id)
         return done.info.run_id, {k: v for k, v in done.data.metrics.items() if k.startswith("eval/")}
     eval_tags = {**tags, "stage": "eval", "scenario": job.scenario.name, "training": training.how,
+                 "evaluation_version": EVALUATION_VERSION,
                  "evaluation_key": key}
     if training.run_id:
         eval_tags["train_run_id"] = training.run_id

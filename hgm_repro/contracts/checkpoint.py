@@ -16,7 +16,7 @@ import torch
 
 from .config_tree import flatten
 from .schema import JobConfig
-from .train_key import train_key, training_config
+from .train_key import EVALUATION_VERSION, train_key, training_config
 
 CHECKPOINT_FORMAT = 1
 # The files a training leaves in its checkpoint directory that evaluation may load.
@@ -34,7 +34,7 @@ LAST_CHECKPOINT = "last.pt"  # everything a resume needs, while training runs
 # best.pt and the logged artifacts hold only these; the optimiser and the replay memory (most of
 # a finished training's bytes) stay in final.pt alone.
 WEIGHTS_KEYS = ("format", "model", "train_key", "training_config", "finished", "env_steps", "updates",
-                "network", "best_val_return", "val_return")
+                "network", "best_val_return", "val_return", "evaluation_version")
 
 # What a network's weights depend on: evaluation needs only these to match.
 ARCHITECTURE_KEYS = ("model.name", "model.network", "model.streams", "observation")
@@ -115,6 +115,12 @@ def save_final(state: dict[str, Any], checkpoint_dir: Path) -> Path:
     final = save_checkpoint(state, Path(checkpoint_dir) / FINAL_CHECKPOINT)
     (Path(checkpoint_dir) / LAST_CHECKPOINT).unlink(missing_ok=True)
     return final
+
+
+def chosen_by_current_validation(checkpoint: dict[str, Any]) -> bool:
+    """Whether a validation-chosen checkpoint (best.pt, a kept pass) was scored by this code's
+    validation: `evaluation_version` 1 (absent) handed hosts blank frames (train_key.EVALUATION_VERSION)."""
+    return checkpoint.get("evaluation_version", 1) == EVALUATION_VERSION
 
 
 def val_checkpoint_path(checkpoint_dir: Path, env_steps: int) -> Path:

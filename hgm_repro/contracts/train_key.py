@@ -29,6 +29,13 @@ from .schema import JobConfig
 TRAIN_KEY_VERSION = 3
 KEY_LENGTH = 12
 
+# Bump when the test or validation procedure changes what it measures, so that a store's finished
+# evaluations of before are not reused, and a best.pt chosen by the old validation is not tested as if
+# chosen by the new one (checkpoints record it as `evaluation_version`).
+# 2: an env that restarted an episode no longer handed every other host of the batch a blank (all-zero)
+# camera and HGM for one decision (evaluation.episodes.run_episodes). Training is unchanged.
+EVALUATION_VERSION = 2
+
 # The groups a training depends on, hashed whole. `eval` (the test and validation), `runtime` (how
 # a job runs: threads, compile, precision, grouping, the memory's layout), `logging`, `tracking`,
 # `device` and `force_retrain` are not: one training serves every test of it, on any machine.
@@ -72,4 +79,5 @@ def evaluation_key(cfg: JobConfig | DictConfig | Mapping[str, Any]) -> str:
     With the training run it evaluates, it names one evaluation: a job whose evaluation already
     FINISHED (a sweep run again after a crash, a requeued job) does not evaluate again.
     """
-    return _digest({k: v for k, v in _root(cfg).items() if k not in NON_EVALUATION_GROUPS})
+    return _digest({"evaluation_version": EVALUATION_VERSION,
+                    **{k: v for k, v in _root(cfg).items() if k not in NON_EVALUATION_GROUPS}})

@@ -107,9 +107,13 @@ def run_episodes(env, policy: Policy, episodes: int, traffic: int) -> pd.DataFra
             # Episode k of an env always starts from seed k's traffic, whenever it starts.
             for k in finished[done].unique().tolist():
                 sim.generator.manual_seed(_traffic_seed(traffic, 0, k))
-                reset = env.reset(TensorDict({"_reset": (done & (finished == k)).unsqueeze(-1)}, batch_size=[n_envs],
-                                             device=env.device))
-                td.update(reset.select(*env.observation_spec.keys(), "done", "terminated", "truncated"))
+                restart = done & (finished == k)
+                reset = env.reset(TensorDict({"_reset": restart.unsqueeze(-1)}, batch_size=[n_envs], device=env.device))
+                # Only the restarted envs' rows: TorchRL fills the rows it did not reset from the tensordict it
+                # was given, which holds nothing but `_reset`, so they come back as zeros. Taken whole, every
+                # other host would see one blank camera and HGM each time any env starts an episode.
+                keys = [*env.observation_spec.keys(), "done", "terminated", "truncated"]
+                td.update(td.select(*keys).where(~restart, reset.select(*keys)))
     return pd.concat(rows, ignore_index=True).sort_values(["env", "episode"], ignore_index=True)
 
 

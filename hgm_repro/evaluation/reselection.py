@@ -8,7 +8,8 @@ validation return (their networks kept by `eval.keep_val_checkpoints`), drives e
 `reselect_envs x reselect_episodes` episodes of fresh validation traffic (the training traffic from
 seed + RESELECT_SEED_OFFSET, which neither validation nor any test draws), and keeps the one with the
 best mean return as `reselected.pt`, with a record of every candidate (`reselection.json`). The
-choice is made once per training and options; later tests of the same training reuse it.
+choice is made once per training and options; later tests of the same training reuse it. Passes
+whose validation handed hosts blank frames (evaluation version 1) are all candidates, unranked.
 """
 
 from __future__ import annotations
@@ -26,6 +27,7 @@ from ..contracts.checkpoint import (
     RESELECTED_CHECKPOINT,
     RESELECTION_RECORD,
     VAL_CHECKPOINTS,
+    chosen_by_current_validation,
     load_checkpoint,
     save_checkpoint,
 )
@@ -45,6 +47,7 @@ class ValidationPass:
     env_steps: int
     val_return: float
     path: Path
+    current: bool  # scored by this code's validation (not the blank-frame one of evaluation version 1)
 
 
 def validation_passes(checkpoint_dir: Path) -> list[ValidationPass]:
@@ -52,7 +55,8 @@ def validation_passes(checkpoint_dir: Path) -> list[ValidationPass]:
     passes = []
     for path in sorted((Path(checkpoint_dir) / VAL_CHECKPOINTS).glob("*.pt")):
         state = load_checkpoint(path)
-        passes.append(ValidationPass(int(state["env_steps"]), float(state["val_return"]), path))
+        passes.append(ValidationPass(int(state["env_steps"]), float(state["val_return"]), path,
+                                     chosen_by_current_validation(state)))
     return passes
 
 
@@ -82,7 +86,8 @@ def reselect(job: JobConfig, checkpoint_dir: Path) -> tuple[Path, dict[str, Any]
         kept = [p.path.name for p in passes]
         if record_path.is_file() and chosen_path.is_file():
             record = json.loads(record_path.read_text())
-            if record.get("options") == options and record.get("passes") == kept:
+            if record.get("options") == options and record.get("passes") == kept \
+                    and record.get("ranked_by_validation") == all(p.current for p in passes):
                 return chosen_path, record
         record = _choose(job, passes, options)
         record["passes"] = kept
@@ -97,13 +102,15 @@ def reselect(job: JobConfig, checkpoint_dir: Path) -> tuple[Path, dict[str, Any]
 @torch.no_grad()
 def _choose(job: JobConfig, passes: list[ValidationPass], options: dict[str, Any]) -> dict[str, Any]:
     """Drive the `top` best passes on the reselection traffic; the best mean return wins (ties: the
-    pass with the higher validation return, then the earlier one)."""
+    pass with the higher validation return, then the earlier one). Passes scored by an older
+    validation (blank frames, evaluation version 1) are not ranked by it: every one is a candidate."""
     from ..models.builders import make_actor
 
     if job.runtime.torch_threads > 0:
         torch.set_num_threads(job.runtime.torch_threads)
     device = torch.device(job.device)
-    candidates = sorted(passes, key=lambda p: (-p.val_return, p.env_steps))[: options["top"]]
+    ranked = all(p.current for p in passes)
+    candidates = sorted(passes, key=lambda p: (-p.val_return, p.env_steps))[: options["top"]] if ranked else passes
     env = make_env(job, job.train_scenario, n_envs=options["envs"], seed=options["traffic_seed"])
     rows = []
     try:
@@ -116,7 +123,8 @@ def _choose(job: JobConfig, passes: list[ValidationPass], options: dict[str, Any
     finally:
         env.close()
     best = max(rows, key=lambda r: r["return"])  # max keeps the first of equals: candidates' order
-    return {"options": options, "candidates": rows, "chosen_env_steps": best["env_steps"]}
+    return {"options": options, "ranked_by_validation": ranked, "candidates": rows,
+            "chosen_env_steps": best["env_steps"]}
 
 
 def _write_json(payload: dict[str, Any], path: Path) -> None:

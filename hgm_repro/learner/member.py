@@ -25,6 +25,7 @@ from ..contracts.checkpoint import (
     EMA_CHECKPOINT,
     FINAL_CHECKPOINT,
     LAST_CHECKPOINT,
+    chosen_by_current_validation,
     load_checkpoint,
     recorded_training_config,
     save_checkpoint,
@@ -34,7 +35,7 @@ from ..contracts.checkpoint import (
 )
 from ..contracts.names import TRAINING_CURVE_METRICS, VAL_SEED_OFFSET
 from ..contracts.schema import JobConfig
-from ..contracts.train_key import train_key
+from ..contracts.train_key import EVALUATION_VERSION, train_key
 from ..envs import make_env
 from ..evaluation.episodes import episode_means, run_episodes
 from ..models.builders import make_actor, make_network
@@ -158,7 +159,9 @@ class Member:
         resume = self.resume
         if resume is None:
             return
-        self.best_val = float(resume.get("best_val_return", -math.inf))
+        # A best return scored by an older validation is not compared with this one's: best.pt is chosen afresh.
+        self.best_val = float(resume.get("best_val_return", -math.inf)) if chosen_by_current_validation(resume) \
+            else -math.inf
         self.net.load_state_dict(resume["network"])
         self.loss_module.load_state_dict(resume["loss"])  # online and target weights
         self.optimizer.load_state_dict(resume["optimizer"])
@@ -272,6 +275,7 @@ class Member:
             **({"ema_network": self.ema_net.state_dict()} if self.ema_net is not None else {}),
             "replay_buffer": self.memory.state_dict() if small else None,
             "rng": rng_state(), "env_rng": self.generator.get_state(), "best_val_return": self.best_val,
+            "evaluation_version": EVALUATION_VERSION,
             **({"grouped_with": group} if group else {}),
         }
 

@@ -18,12 +18,13 @@ from omegaconf import DictConfig
 from hgm_repro.app.job import RUN_ID_FILE, run_job
 from hgm_repro.app.provenance import git_info
 from hgm_repro.app.store import STORE_FORMAT_TAG, StoreError, Tracker, flatten, resolve_location, retry, tidy_number
+from hgm_repro.contracts.checkpoint import CHECKPOINT_FORMAT, save_checkpoint
 from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.errors import ConfigError
 from hgm_repro.contracts.interrupts import JobInterrupted
 from hgm_repro.contracts.schema import JobConfig, validate
 from hgm_repro.contracts.simulator_config import ScenarioConfig
-from hgm_repro.contracts.train_key import train_key
+from hgm_repro.contracts.train_key import EVALUATION_VERSION, train_key
 
 
 def make_cfg(*overrides: str) -> DictConfig:
@@ -333,15 +334,17 @@ def test_bad_value_stops_before_the_store_is_touched(tmp_path: Path, override: s
 class ValidatingLearner(FakeLearner):
     """Like the learner with validation on: logs `val/episode_return`, keeps best.pt at its best."""
 
-    def __init__(self, returns: tuple[float, ...] = (3.0, 7.5, 5.0), keep_best: bool = True) -> None:
+    def __init__(self, returns: tuple[float, ...] = (3.0, 7.5, 5.0), keep_best: bool = True,
+                 evaluation_version: int = EVALUATION_VERSION) -> None:
         super().__init__()
-        self.returns, self.keep_best = returns, keep_best
+        self.returns, self.keep_best, self.evaluation_version = returns, keep_best, evaluation_version
 
     def __call__(self, job: JobConfig, checkpoint_dir: Path, log) -> Path:
         for step, value in enumerate(self.returns, start=1):
             log({"val/episode_return": value}, 64 * step)
         if self.keep_best:
-            (checkpoint_dir / "best.pt").write_text("best weights")
+            save_checkpoint({"format": CHECKPOINT_FORMAT, "network": {}, "evaluation_version": self.evaluation_version},
+                            checkpoint_dir / "best.pt")
         return super().__call__(job, checkpoint_dir, log)
 
 
@@ -393,6 +396,13 @@ def test_eval_checkpoint_best_without_best_pt_fails_clearly(launch: Path) -> Non
         run_job(make_cfg(VALIDATION_ON, "eval.checkpoint=best"), launch,
                 train_fn=ValidatingLearner(keep_best=False), evaluate_fn=fake_evaluate)
     assert runs(launch, "eval") == []  # stopped before an evaluation run was opened
+    # A best.pt chosen by the validation of before evaluation version 2 (blank frames) is not tested as
+    # the best: the job names the versions and what it can test instead.
+    with pytest.raises(ConfigError, match=r"chosen by the validation of before evaluation version 2.*"
+                                          r"eval.checkpoint=final, or eval.checkpoint=reselected"):
+        run_job(make_cfg(VALIDATION_ON, "eval.checkpoint=best", "seed=3"), launch,
+                train_fn=ValidatingLearner(evaluation_version=1), evaluate_fn=fake_evaluate)
+    assert runs(launch, "eval") == []
     with pytest.raises(ConfigError, match="eval.checkpoint='last' is not allowed"):
         validate(make_cfg("eval.checkpoint=last"))
 

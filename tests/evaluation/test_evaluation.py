@@ -93,3 +93,42 @@ def test_evaluation_accepts_other_test_settings(checkpoint):
     job = compose_job("eval.test_envs=2", "eval.test_steps=40", "learner.lr=0.5")
     result = evaluate(job, scenario_config("5", job.simulator), checkpoint)
     assert len(result.episodes) == 2 * episodes_per_env(40, 2, 20)
+
+
+def test_an_episode_that_restarts_leaves_every_other_hosts_observation_as_it_was() -> None:
+    """Where a crash in one env meets driving in the others: run_episodes restarts only the finished
+    envs, and every host is handed its own current camera and HGM stacks at every decision (a partial
+    TorchRL reset once handed the others all-zero observations, a blank frame each time any env
+    restarted)."""
+    from torch.nn import functional as F
+
+    from hgm_repro.envs import make_env
+    from hgm_repro.evaluation.episodes import run_episodes
+    from hgm_repro.simulator import N_ACTIONS, Action
+
+    job = compose_job("simulator.episode_seconds=8.0")
+    env = make_env(job, job.train_scenario, n_envs=4, seed=7)
+    keys = [k for k in env.observation_spec.keys() if k not in ("episode", "reward_terms")]
+    seen = {"decisions": 0, "partial_restarts": 0}
+    last_decisions = None
+
+    def check_and_drive(td: TensorDict) -> TensorDict:
+        nonlocal last_decisions
+        stacks = env.observations.stacks
+        for key in keys:  # what the host is handed is what its builder holds, every env, every decision
+            assert torch.equal(td[key], stacks[key].stack), (key, seen)
+            assert td[key].flatten(1).any(1).all(), key  # and never a blank observation
+        decisions = env.simulator.state.decision.clone()
+        if last_decisions is not None:
+            restarted = decisions < last_decisions
+            seen["partial_restarts"] += int(restarted.any() and not restarted.all())
+        last_decisions = decisions
+        seen["decisions"] += 1
+        # Env 0 always accelerates (it rear-ends someone early); the others keep their speed.
+        action = torch.full((4,), int(Action.NO_ACTION))
+        action[0] = int(Action.ACCELERATE)
+        return td.set("action", F.one_hot(action, N_ACTIONS))
+
+    episodes = run_episodes(env, check_and_drive, 3, traffic=7)
+    assert len(episodes) == 12 and episodes.loc[episodes.env == 0, "collisions"].sum() >= 1
+    assert seen["partial_restarts"] >= 1  # the case under test happened: some envs restarted, not all

@@ -154,3 +154,20 @@ def test_reselection_without_kept_passes_is_refused_before_any_work(trained, tmp
     tracker = Tracker(resolve_location(compose_cfg(*RESELECT).tracking, launch), "hgm_repro")
     tests = tracker.client.search_runs([tracker.experiment_id], "tags.stage = 'eval'")
     assert [r.info.run_id for r in tests] == [outcome.eval_run_id]
+
+
+def test_passes_scored_by_the_blank_frame_validation_are_all_candidates(trained, tmp_path: Path) -> None:
+    """Kept passes of a training whose validation handed hosts blank frames (evaluation version 1):
+    their validation returns rank nothing, so reselection drives every pass."""
+    from hgm_repro.contracts.checkpoint import save_checkpoint
+
+    _, outcome = trained
+    directory = tmp_path / "old"
+    shutil.copytree(outcome.training.checkpoint.parent, directory)
+    for path in (directory / VAL_CHECKPOINTS).glob("*.pt"):
+        state = load_checkpoint(path)
+        del state["evaluation_version"]
+        save_checkpoint(state, path)
+    _, record = reselection.reselect(compose_job(*RESELECT), directory)
+    assert record["ranked_by_validation"] is False
+    assert [c["env_steps"] for c in record["candidates"]] == [32, 64, 96, 128]
