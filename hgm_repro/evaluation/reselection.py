@@ -24,6 +24,7 @@ import torch
 from filelock import FileLock
 
 from ..contracts.checkpoint import (
+    BEST_CHECKPOINT,
     RESELECTED_CHECKPOINT,
     RESELECTION_RECORD,
     VAL_CHECKPOINTS,
@@ -33,8 +34,9 @@ from ..contracts.checkpoint import (
 )
 from ..contracts.errors import ConfigError
 from ..contracts.interrupts import acquire_stoppably
-from ..contracts.names import RESELECT_SEED_OFFSET
+from ..contracts.names import RESELECT_SEED_OFFSET, VAL_SEED_OFFSET
 from ..contracts.schema import JobConfig
+from ..contracts.train_key import EVALUATION_VERSION
 from ..envs import make_env
 from .episodes import run_episodes
 from .policies import trained_network
@@ -131,3 +133,36 @@ def _write_json(payload: dict[str, Any], path: Path) -> None:
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     tmp.write_text(json.dumps(payload, indent=2))
     os.replace(tmp, path)
+
+
+@torch.no_grad()
+def revalidate(job: JobConfig, checkpoint_dir: Path) -> list[ValidationPass]:
+    """Score every kept pass again with this code's validation (`eval.val_envs x val_episodes` greedy
+    episodes on the validation traffic, as training does) and choose best.pt afresh from those scores:
+    for a training whose validation predates evaluation version 2, without training again. The passes
+    keep their new scores (so reselection ranks them); returns them."""
+    from ..models.builders import make_actor
+
+    checkpoint_dir = Path(checkpoint_dir)
+    passes = validation_passes(checkpoint_dir)
+    if not passes:
+        raise ConfigError(f"{checkpoint_dir / VAL_CHECKPOINTS} holds no validation pass's network: the training ran "
+                          "with eval.keep_val_checkpoints=false, so its best.pt cannot be chosen again.")
+    if job.runtime.torch_threads > 0:
+        torch.set_num_threads(job.runtime.torch_threads)
+    device, traffic = torch.device(job.device), job.seed + VAL_SEED_OFFSET
+    env = make_env(job, job.train_scenario, n_envs=job.eval.val_envs, seed=traffic)
+    scored = []
+    try:
+        for kept in passes:
+            actor = make_actor(trained_network(job, kept.path, device)).to(device)
+            score = float(run_episodes(env, actor, job.eval.val_episodes, traffic)["episode_return"].mean())
+            state = load_checkpoint(kept.path)
+            save_checkpoint({**state, "val_return": score, "evaluation_version": EVALUATION_VERSION}, kept.path)
+            scored.append(ValidationPass(kept.env_steps, score, kept.path, True))
+    finally:
+        env.close()
+    best = max(scored, key=lambda p: p.val_return)  # the first of equals, as training keeps it
+    save_checkpoint({**load_checkpoint(best.path), "best_val_return": best.val_return,
+                     "evaluation_version": EVALUATION_VERSION}, checkpoint_dir / BEST_CHECKPOINT)
+    return scored

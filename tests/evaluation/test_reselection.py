@@ -171,3 +171,28 @@ def test_passes_scored_by_the_blank_frame_validation_are_all_candidates(trained,
     _, record = reselection.reselect(compose_job(*RESELECT), directory)
     assert record["ranked_by_validation"] is False
     assert [c["env_steps"] for c in record["candidates"]] == [32, 64, 96, 128]
+
+
+def test_revalidation_scores_kept_passes_as_training_did_and_chooses_best_pt_again(trained, tmp_path: Path) -> None:
+    """A training whose validation predates evaluation version 2 (its passes' scores and best.pt are the
+    blank-frame ones): revalidation gives each pass the score this code's validation gives it, which
+    for this training is what it logged, and writes best.pt from those scores."""
+    from hgm_repro.contracts.checkpoint import chosen_by_current_validation, save_checkpoint
+
+    launch, outcome = trained
+    directory = tmp_path / "old"
+    shutil.copytree(outcome.training.checkpoint.parent, directory)
+    (directory / BEST_CHECKPOINT).unlink()
+    for path in (directory / VAL_CHECKPOINTS).glob("*.pt"):  # scores of the old validation: made up here
+        state = load_checkpoint(path)
+        del state["evaluation_version"]
+        save_checkpoint({**state, "val_return": -float(state["env_steps"])}, path)
+    scored = reselection.revalidate(compose_job(*RESELECT), directory)
+    tracker = Tracker(resolve_location(compose_cfg(*RESELECT).tracking, launch), "hgm_repro")
+    logged = {m.step: m.value for m in tracker.client.get_metric_history(outcome.training.run_id,
+                                                                         "val/episode_return")}
+    assert {p.env_steps: pytest.approx(p.val_return) for p in scored} == logged
+    assert all(p.current for p in reselection.validation_passes(directory))
+    best = load_checkpoint(directory / BEST_CHECKPOINT)
+    assert chosen_by_current_validation(best)
+    assert _same_weights(directory / BEST_CHECKPOINT, outcome.training.checkpoint.parent / BEST_CHECKPOINT)

@@ -1,0 +1,49 @@
+"""Choose best.pt again, with the fixed validation, for a study arm's trainings that kept their passes.
+
+    python studies/revalidate.py --checkpoints studies/runs/checkpoints --arm r20_enriched_160k \
+        --seeds 100 101 102 103
+
+Before evaluation version 2 a validation pass handed hosts a blank frame whenever another env restarted
+(docs/interfaces.md), so the best.pt of such a training was chosen on disturbed scores. For a training
+that kept every pass's network (eval.keep_val_checkpoints), this scores each pass again as training's
+validation would now and rewrites best.pt and the passes' scores (hgm_repro.evaluation.reselection.
+revalidate); `learner_study.py run --also-best` then tests the new best.pt. Nothing is trained.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from study_arms import ARMS
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--checkpoints", type=Path, required=True, help="the store's checkpoints/ folder")
+    p.add_argument("--arm", required=True, choices=sorted(ARMS))
+    p.add_argument("--seeds", nargs="+", type=int, required=True)
+    a = p.parse_args(argv)
+    from hydra import compose, initialize_config_dir
+
+    from hgm_repro.contracts.conf_dir import CONF_DIR
+    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.train_key import train_key
+    from hgm_repro.evaluation.reselection import revalidate
+
+    for seed in a.seeds:
+        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+            job = validate(compose("config", overrides=["experiment=quick", f"seed={seed}", *ARMS[a.arm]]))
+        directory = a.checkpoints / train_key(job)
+        if not directory.is_dir():
+            p.error(f"seed {seed}: no training of arm {a.arm} in {directory}")
+        scored = revalidate(job, directory)
+        best = max(scored, key=lambda s: s.val_return)
+        print(f"seed {seed}: " + ", ".join(f"{s.env_steps // 1000}k {s.val_return:.0f}" for s in scored)
+              + f"; best.pt: {best.env_steps // 1000}k", flush=True)
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    main()
