@@ -126,3 +126,25 @@ def test_the_test_length_sections_table_is_its_csv_and_its_short_test_is_the_pub
     assert len(both) == len(by_test["preset"])
     for column in ("episode_return", "ref_return", "collisions"):
         assert (both[column] - both[f"{column}_published"]).abs().max() < 1e-3, column
+
+
+TEST_LENGTH_V2 = REPO_ROOT / "docs" / "study" / "test_length_v2" / "margins.csv"
+
+
+@pytest.mark.skipif(not (TEST_LENGTH.is_file() and TEST_LENGTH_V2.is_file()), reason="no committed re-tests")
+def test_the_fixed_re_tests_table_is_both_csvs_and_the_human_host_did_not_move():
+    """Section 14: the published variant networks before and after the blank-frame fix. The human-driven
+    host reads the simulator, not observations: its test must not move by a digit."""
+    before, after = (pd.read_csv(path) for path in (TEST_LENGTH, TEST_LENGTH_V2))
+    text = STUDY.read_text().split("\n## 14. ", 1)[1].split("\n## ", 1)[0]
+
+    def cell(row: pd.Series) -> str:
+        return f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], {row['collisions']:.2f}"
+
+    tables = {(when, test): part.set_index("seed") for when, frame in (("before", before), ("after", after))
+              for test, part in frame[frame["model"] == "proposed_enriched"].groupby("test")}
+    for seed in tables["before", "preset"].index:
+        cells = [cell(tables[when, test].loc[seed]) for test in ("preset", "long") for when in ("before", "after")]
+        assert f"| {seed} | " + " | ".join(cells) + " |" in text, seed
+    for test in ("preset", "long"):
+        assert (tables["before", test]["ref_return"] - tables["after", test]["ref_return"]).abs().max() < 1e-3
