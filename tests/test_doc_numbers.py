@@ -91,7 +91,8 @@ STUDY = REPO_ROOT / "docs" / "study.md"
 # Each study section whose table the study report wrote, and the report's file.
 STUDY_TABLES = {"10": REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md",
                 "11": REPO_ROOT / "docs" / "study" / "r20_enriched_160k" / "learner_study_table.md",
-                "12": REPO_ROOT / "docs" / "study" / "r20_methods_160k" / "learner_study_table.md"}
+                "12": REPO_ROOT / "docs" / "study" / "r20_methods_160k" / "learner_study_table.md",
+                "14": REPO_ROOT / "docs" / "study" / "r20_reselect" / "learner_study_table.md"}
 
 
 @pytest.mark.parametrize("section", sorted(STUDY_TABLES))
