@@ -54,7 +54,8 @@ def _traffic_seed(base: int, stream: int, index: int) -> int:
 Policy = Callable[[TensorDictBase], TensorDictBase]
 
 
-def _learned_policy(job: JobConfig, checkpoint: Path | None, device: torch.device) -> Policy:
+def learned_policy(job: JobConfig, checkpoint: Path | None, device: torch.device) -> Policy:
+    """The greedy policy of `job.model`'s network with the weights of `checkpoint`, on `device`."""
     from ..models.builders import make_actor
 
     return make_actor(trained_network(job, checkpoint, device)).to(device)
@@ -135,7 +136,7 @@ def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) 
     n_envs = job.eval.test_envs
     traffic = job.seed + EVAL_SEED_OFFSET
     env = make_env(job, scenario, n_envs=n_envs, seed=traffic)
-    policy = _learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
+    policy = learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
     quota = episodes_per_env(job.eval.test_steps, n_envs, env.simulator.config.episode_decisions)
     episodes = run_episodes(env, policy, quota, traffic)
     env.close()

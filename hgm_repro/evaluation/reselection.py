@@ -38,8 +38,7 @@ from ..contracts.names import RESELECT_SEED_OFFSET, VAL_SEED_OFFSET
 from ..contracts.schema import JobConfig
 from ..contracts.train_key import EVALUATION_VERSION
 from ..envs import make_env
-from .episodes import run_episodes
-from .policies import trained_network
+from .episodes import learned_policy, run_episodes
 
 
 @dataclass(frozen=True)
@@ -106,8 +105,6 @@ def _choose(job: JobConfig, passes: list[ValidationPass], options: dict[str, Any
     """Drive the `top` best passes on the reselection traffic; the best mean return wins (ties: the
     pass with the higher validation return, then the earlier one). Passes scored by an older
     validation (blank frames, evaluation version 1) are not ranked by it: every one is a candidate."""
-    from ..models.builders import make_actor
-
     if job.runtime.torch_threads > 0:
         torch.set_num_threads(job.runtime.torch_threads)
     device = torch.device(job.device)
@@ -117,8 +114,8 @@ def _choose(job: JobConfig, passes: list[ValidationPass], options: dict[str, Any
     rows = []
     try:
         for candidate in candidates:
-            actor = make_actor(trained_network(job, candidate.path, device)).to(device)
-            episodes = run_episodes(env, actor, options["episodes"], options["traffic_seed"])
+            episodes = run_episodes(env, learned_policy(job, candidate.path, device), options["episodes"],
+                                    options["traffic_seed"])
             rows.append({"env_steps": candidate.env_steps, "val_return": candidate.val_return,
                          "return": float(episodes["episode_return"].mean()),
                          "collisions": float(episodes["collisions"].mean()), "episodes": len(episodes)})
@@ -141,8 +138,6 @@ def revalidate(job: JobConfig, checkpoint_dir: Path) -> list[ValidationPass]:
     episodes on the validation traffic, as training does) and choose best.pt afresh from those scores:
     for a training whose validation predates evaluation version 2, without training again. The passes
     keep their new scores (so reselection ranks them); returns them."""
-    from ..models.builders import make_actor
-
     checkpoint_dir = Path(checkpoint_dir)
     passes = validation_passes(checkpoint_dir)
     if not passes:
@@ -155,8 +150,8 @@ def revalidate(job: JobConfig, checkpoint_dir: Path) -> list[ValidationPass]:
     scored = []
     try:
         for kept in passes:
-            actor = make_actor(trained_network(job, kept.path, device)).to(device)
-            score = float(run_episodes(env, actor, job.eval.val_episodes, traffic)["episode_return"].mean())
+            policy = learned_policy(job, kept.path, device)
+            score = float(run_episodes(env, policy, job.eval.val_episodes, traffic)["episode_return"].mean())
             state = load_checkpoint(kept.path)
             save_checkpoint({**state, "val_return": score, "evaluation_version": EVALUATION_VERSION}, kept.path)
             scored.append(ValidationPass(kept.env_steps, score, kept.path, True))

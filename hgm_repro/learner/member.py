@@ -245,14 +245,16 @@ class Member:
         episodes = run_episodes(self.val_env, self.actor, episodes_per_env, seed)
         self.net.train()
         metrics = episode_means(episodes, "val")
-        if self.job.eval.keep_val_checkpoints:  # each pass's network, for reselection (eval.checkpoint=reselected)
-            state = weights_only(self.checkpoint_state(finished=False, **progress))
-            save_checkpoint({**state, "val_return": metrics["val/episode_return"]},
-                            val_checkpoint_path(self.checkpoint_dir, progress["env_steps"]))
-        if metrics["val/episode_return"] > self.best_val:
+        keep, better = self.job.eval.keep_val_checkpoints, metrics["val/episode_return"] > self.best_val
+        if better:
             self.best_val = metrics["val/episode_return"]
-            best = weights_only(self.checkpoint_state(finished=False, **progress))  # best.pt is for its weights
-            save_checkpoint(best, self.checkpoint_dir / BEST_CHECKPOINT)
+        if keep or better:  # one weights-only state serves both files
+            state = weights_only(self.checkpoint_state(finished=False, **progress))
+            if keep:  # each pass's network, for reselection (eval.checkpoint=reselected)
+                save_checkpoint({**state, "val_return": metrics["val/episode_return"]},
+                                val_checkpoint_path(self.checkpoint_dir, progress["env_steps"]))
+            if better:
+                save_checkpoint(state, self.checkpoint_dir / BEST_CHECKPOINT)
         metrics["val/best_episode_return"] = self.best_val
         if self.ema_net is not None:  # the averaged weights on the same validation traffic
             self.ema_net.eval()
