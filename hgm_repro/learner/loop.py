@@ -208,13 +208,16 @@ def _train_together(members: list[Member]) -> list[Path]:
                 with deferred():  # a signal during the store write waits for the stop below, after last.pt
                     member.log(metrics, steps_done)
                 if bar.disable:  # no bar when output goes to a file: a line per log interval instead
+                    # The greedy validation is named only on the lines of a pass (a "nan" on the others read
+                    # as a failed validation).
+                    greedy = (f"; greedy validation: return {metrics['val/episode_return']:.0f}, crashes per "
+                              f"episode {metrics['val/collisions']:.2f}" if "val/collisions" in metrics else "")
                     logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h, "
-                                "crashes per episode %.2f (greedy validation %.2f)",
+                                "crashes per episode %.2f%s",
                                 member.job.model.name if count == 1 else f"{member.job.model.name} seed "
                                 f"{member.job.seed}", steps_done, total_steps, rate, metrics["train/epsilon"],
                                 metrics.get("train/avg_speed_kmh", float("nan")),
-                                metrics.get("train/collisions", float("nan")),
-                                metrics.get("val/collisions", float("nan")))
+                                metrics.get("train/collisions", float("nan")), greedy)
             if count > 1:  # one line per group (scripts/gpu/protocol.sh reads its rate)
                 logger.info("grouped training '%s': %d/%d env steps per member, %.0f steps/s per member",
                             job0.model.name, steps_done, total_steps, rate)

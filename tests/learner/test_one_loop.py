@@ -80,3 +80,18 @@ def test_a_checkpoint_of_an_older_training_identity_is_refused_with_why(pinned_r
     torch.save(state, tmp_path / "last.pt")
     with pytest.raises(CheckpointMismatchError, match="training identity version 2, this code's is 3"):
         train(compose_job("seed=3"), tmp_path, Recorder())
+
+
+def test_the_log_lines_name_the_greedy_validation_only_on_a_pass(tmp_path: Path, caplog):
+    """Without a progress bar (output to a file) the loop writes a line per log interval; the greedy
+    validation's return and crash rate belong on the lines of a pass, and no line shows a "nan" for it."""
+    caplog.set_level("INFO", logger="hgm_repro.learner.loop")
+    train(compose_job("seed=3"), tmp_path, Recorder())
+    lines = [r.getMessage() for r in caplog.records if r.getMessage().startswith("train ")]
+    assert len(lines) == len(PINNED)
+    for step, line in zip(sorted(PINNED), lines, strict=True):
+        assert f" {step}/128 env steps" in line and "nan" not in line, line
+        if "val/episode_return" in PINNED[step]:
+            assert f"greedy validation: return {PINNED[step]['val/episode_return']:.0f}, crashes per episode" in line
+        else:
+            assert "greedy validation" not in line, line
