@@ -30,7 +30,7 @@ def main(argv: list[str] | None = None) -> None:
     from hgm_repro.contracts.conf_dir import CONF_DIR
     from hgm_repro.contracts.schema import validate
     from hgm_repro.contracts.train_key import train_key
-    from hgm_repro.evaluation.reselection import revalidate
+    from hgm_repro.evaluation.reselection import best_pass, revalidate
 
     for seed in a.seeds:
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> None:
         if not directory.is_dir():
             p.error(f"seed {seed}: no training of arm {a.arm} in {directory}")
         scored = revalidate(job, directory)
-        best = max(scored, key=lambda s: s.val_return)
+        best = best_pass(scored)
         print(f"seed {seed}: " + ", ".join(f"{s.env_steps // 1000}k {s.val_return:.0f}" for s in scored)
               + f"; best.pt: {best.env_steps // 1000}k", flush=True)
 

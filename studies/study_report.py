@@ -146,6 +146,16 @@ def earlier_results(per_seed_csv: Path, arms: list[str]) -> pd.DataFrame:
     return earlier[earlier["arm"].isin(arms)][["arm", "seed", *RESULTS]]
 
 
+def _checkpoint_overrides(checkpoint: str) -> list[str]:
+    """What an arm's `@checkpoint` suffix tested: `best80k` is best.pt among the passes up to 80k env steps
+    (studies/budget_cut.py), the others are eval.checkpoint's own choices."""
+    if not checkpoint:
+        return []
+    if checkpoint.startswith("best") and checkpoint != "best":
+        return ["eval.checkpoint=best", f"(passes up to {checkpoint[4:]} env steps: studies/budget_cut.py)"]
+    return [f"eval.checkpoint={checkpoint}"]
+
+
 def markdown_table(results: pd.DataFrame, summary: pd.DataFrame) -> str:
     """The study's table as docs/study.md shows it: per seed `return, collisions`, the mean over seeds
     with its 95% CI and the IQM, the collisions with their CI, and the seeds that meet issue 20's bar."""
@@ -180,7 +190,7 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
     for arm, grp in results.groupby("arm", sort=False):
         name, _, checkpoint = arm.partition("@")
         overrides = f"model={arm}" if arm in STUDY_REFERENCES else \
-            " ".join(ARMS[name] + ([f"eval.checkpoint={checkpoint}"] if checkpoint else []))
+            " ".join(ARMS[name] + _checkpoint_overrides(checkpoint))
         row = {"arm": arm, "overrides": overrides, "seeds": len(grp)}
         for m in RESULTS:
             est = mean_ci(grp[m].to_numpy(dtype=float))
@@ -191,9 +201,11 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
             row[f"{m}_iqm"], row[f"{m}_iqm_lo"], row[f"{m}_iqm_hi"] = est.point, est.low, est.high
         row["seeds_beating_human_under_0.2"] = _bar_count(grp, results)
         rows.append(row)
-    order = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema", f"{arm}@reselected")],
+    known = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema", f"{arm}@reselected")],
                          *STUDY_REFERENCES)
              if a in set(results["arm"])]
+    # Rows of other tests of an arm (studies/budget_cut.py's ARM@best80k) follow the known ones in name order.
+    order = known + sorted(set(results["arm"]) - set(known))
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
     (out / "learner_study_table.md").write_text(markdown_table(results, summary))

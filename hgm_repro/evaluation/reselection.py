@@ -61,6 +61,16 @@ def validation_passes(checkpoint_dir: Path) -> list[ValidationPass]:
     return passes
 
 
+def best_pass(passes: list[ValidationPass], budget: int | None = None) -> ValidationPass:
+    """The pass best.pt holds (the highest validation return, the first of equals, as training keeps it),
+    or, with `budget`, the one best.pt would hold had the training stopped after `budget` env steps."""
+    within = [p for p in passes if budget is None or p.env_steps <= budget]
+    if not within:
+        raise ConfigError(f"no validation pass at or before {budget} env steps; the passes ran at "
+                          f"{[p.env_steps for p in passes]}")
+    return max(within, key=lambda p: p.val_return)
+
+
 def reselection_options(job: JobConfig) -> dict[str, Any]:
     """What decides a reselection besides the training: a record made under other options is redone."""
     return {"top": job.eval.reselect_top, "envs": job.eval.reselect_envs, "episodes": job.eval.reselect_episodes,
@@ -157,7 +167,7 @@ def revalidate(job: JobConfig, checkpoint_dir: Path) -> list[ValidationPass]:
             scored.append(ValidationPass(kept.env_steps, score, kept.path, True))
     finally:
         env.close()
-    best = max(scored, key=lambda p: p.val_return)  # the first of equals, as training keeps it
+    best = best_pass(scored)
     save_checkpoint({**load_checkpoint(best.path), "best_val_return": best.val_return,
                      "evaluation_version": EVALUATION_VERSION}, checkpoint_dir / BEST_CHECKPOINT)
     return scored

@@ -196,3 +196,23 @@ def test_revalidation_scores_kept_passes_as_training_did_and_chooses_best_pt_aga
     best = load_checkpoint(directory / BEST_CHECKPOINT)
     assert chosen_by_current_validation(best)
     assert _same_weights(directory / BEST_CHECKPOINT, outcome.training.checkpoint.parent / BEST_CHECKPOINT)
+
+
+def test_best_pass_within_a_budget_is_what_a_shorter_training_would_keep(trained) -> None:
+    """best_pass with a budget takes the best of the passes at or before it (studies/budget_cut.py tests it as
+    a shorter training's best.pt); without one it is the training's own best.pt; a budget before the first
+    pass is refused with the passes' steps."""
+    _, outcome = trained
+    directory = outcome.training.checkpoint.parent
+    passes = reselection.validation_passes(directory)
+    assert _same_weights(reselection.best_pass(passes).path, directory / BEST_CHECKPOINT)
+    for budget in (32, 64, 96, 100):
+        within = [p for p in passes if p.env_steps <= budget]
+        chosen = reselection.best_pass(passes, budget)
+        assert chosen.env_steps <= budget
+        assert chosen.val_return == max(p.val_return for p in within)
+        assert chosen is next(p for p in within if p.val_return == chosen.val_return)  # the first of equals
+    tied = [reselection.ValidationPass(s, 7.0, p.path, True) for s, p in zip((32, 64), passes, strict=False)]
+    assert reselection.best_pass(tied).env_steps == 32
+    with pytest.raises(ConfigError, match=r"at or before 31 env steps.*\[32, 64, 96, 128\]"):
+        reselection.best_pass(passes, 31)
