@@ -64,13 +64,15 @@ def main(argv: list[str] | None = None) -> None:
         if stale:
             p.error(f"seed {seed}: passes {stale} were scored by the blank-frame validation of evaluation version 1; "
                     "score them again first (studies/revalidate.py)")
+        tested: dict[Path, pd.Series] = {}
         for budget in a.budgets:
             try:
                 chosen = best_pass(passes, budget)
             except ConfigError as error:
                 p.error(f"seed {seed}: {error}")
-            result = evaluate(job, job.scenario, chosen.path)
-            means = result.episodes[list(RESULTS)].mean()
+            if chosen.path not in tested:  # budgets that choose the same pass share its (deterministic) test
+                tested[chosen.path] = evaluate(job, job.scenario, chosen.path).episodes[list(RESULTS)].mean()
+            means = tested[chosen.path]
             rows.append({"arm": cut_name(a.arm, budget), "seed": seed, **means.to_dict()})
             choices.append(f"seed {seed}, {budget // 1000}k: the {chosen.env_steps // 1000}k pass "
                            f"(validation {chosen.val_return:.0f}) tests at {means['episode_return']:.0f} "

@@ -157,3 +157,28 @@ def test_the_fixed_re_tests_table_is_both_csvs_and_the_human_host_did_not_move()
         assert f"| {seed} | " + " | ".join(cells) + " |" in text, seed
     for test in ("preset", "long"):
         assert (tables["before", test]["ref_return"] - tables["after", test]["ref_return"]).abs().max() < 1e-3
+
+
+TEST_LENGTH_PAPER = REPO_ROOT / "docs" / "study" / "test_length_paper" / "margins.csv"
+
+
+@pytest.mark.skipif(not (TEST_LENGTH_PAPER.is_file() and (BUNDLE / "evals.csv").is_file()),
+                    reason="no committed re-test of the published paper-HGM networks")
+def test_the_paper_hgm_re_tests_table_is_its_csv_and_its_short_test_is_the_published_one():
+    """Section 15: the published paper-HGM networks of scenario 3 re-tested on 160 episodes. The re-test's
+    first 48 episodes are the published test, so they must give docs/results' numbers for both hosts."""
+    study = pd.read_csv(TEST_LENGTH_PAPER)
+    text = STUDY.read_text().split("\n## 15. ", 1)[1].split("\n## ", 1)[0]
+
+    def cell(row: pd.Series) -> str:
+        return f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], {row['collisions']:.2f}"
+
+    tables = {test: part.set_index("seed") for test, part in study[study["model"] == "proposed"].groupby("test")}
+    for seed in tables["preset"].index:
+        assert f"| {seed} | {cell(tables['preset'].loc[seed])} | {cell(tables['long'].loc[seed])} |" in text, seed
+    evals = _evals()
+    s3 = evals[evals["scenario"] == "3"].set_index(["model", "seed"])
+    for seed, row in tables["preset"].iterrows():
+        assert abs(row["episode_return"] - s3.loc[("proposed", seed), "episode_return"]) < 1e-3
+        assert abs(row["collisions"] - s3.loc[("proposed", seed), "collisions"]) < 1e-6
+        assert abs(row["ref_return"] - s3.loc[("human", seed), "episode_return"]) < 1e-3
