@@ -1,16 +1,21 @@
-"""What a shorter training's best.pt would have been: for a study arm's trainings that kept their
+"""What a shorter training's best.pt would have been: for study arms whose trainings kept their
 validation passes, the pass with the best validation return among those at or before each budget,
 tested as the study tests (training traffic, the preset's test). Nothing is trained.
 
-    python studies/budget_cut.py --checkpoints studies/runs/checkpoints --arm r20_all_160k \
-        --seeds 100 101 102 103 104 --budgets 80000 120000 --out docs/study/r20_paper160/budget_cut.csv
+    python studies/budget_cut.py --checkpoints studies/runs/checkpoints OTHER/checkpoints \
+        --arms r20_all_160k r20_enriched_160k --seeds 100 101 102 103 104 --budgets 80000 120000 160000 \
+        --out docs/study/r20_budget/budget_cut.csv --figure docs/study/r20_budget/validation_passes.png \
+        --references docs/study/r20_reselect/learner_study_per_seed.csv
 
-One 160k-step training then answers for 80k and 120k too, at the cost of a test per budget. It is close
-to, not the same as, a training that stops at the budget: every schedule of the quick presets is in
-absolute steps except prioritized replay's importance-sampling exponent (beta), which anneals over the
-whole run, so at 80k steps of a 160k run it is half-way where an 80k run's is at its end. The rows are
-named `ARM@bestNk` in the learner study's per-seed format, so that `learner_study.py report --earlier
-FILE --earlier-arms ARM@best80k` puts them in its table beside the arm's own best.pt.
+One 160k-step training then answers for 80k and 120k too, at the cost of a test per distinct pass. It
+is close to, not the same as, a training that stops at the budget: every schedule of the quick presets
+is in absolute steps except prioritized replay's importance-sampling exponent (beta), which anneals
+over the whole run, so at 80k steps of a 160k run it is half-way where an 80k run's is at its end.
+The rows are named `ARM@bestNk` in the learner study's per-seed format, so that `learner_study.py
+report --earlier FILE --earlier-arms ARM@best80k` puts them in its table beside the arm's own best.pt.
+`--figure` draws every kept pass's validation return (as this code's validation scores it: passes of
+an older validation must be scored again first, studies/revalidate.py) per seed, with the human-driven
+host's test return on that seed from `--references` (a learner-study per-seed CSV) as the bar.
 """
 
 from __future__ import annotations
@@ -30,17 +35,52 @@ def cut_name(arm: str, budget: int) -> str:
     return f"{arm}@best{budget // 1000}k" if budget % 1000 == 0 else f"{arm}@best{budget}"
 
 
+def _figure(passes: pd.DataFrame, references: pd.DataFrame | None, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.ticker import FuncFormatter
+
+    seeds = sorted(passes["seed"].unique())
+    fig, axes = plt.subplots(1, len(seeds), figsize=(4.2 * len(seeds), 3.6), sharey=True, squeeze=False)
+    colours = dict(zip(passes["arm"].unique(), plt.rcParams["axes.prop_cycle"].by_key()["color"], strict=False))
+    for ax, seed in zip(axes[0], seeds, strict=True):
+        for arm, points in passes[passes["seed"] == seed].groupby("arm", sort=False):
+            points = points.sort_values("env_steps")
+            ax.plot(points["env_steps"], points["val_return"], marker=".", color=colours[arm], label=arm)
+        if references is not None:
+            human = references[(references["arm"] == "human") & (references["seed"] == seed)]["episode_return"]
+            if len(human):
+                ax.axhline(float(human.iloc[0]), color="black", linestyle="--", linewidth=1,
+                           label="human-driven host (test)")
+        ax.set_title(f"seed {seed}")
+        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
+        ax.set_xlabel("env steps")
+    axes[0][0].set_ylabel("greedy validation return")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--checkpoints", type=Path, required=True, help="the study store's checkpoints/ folder")
-    p.add_argument("--arm", required=True, choices=sorted(ARMS))
+    p.add_argument("--checkpoints", type=Path, nargs="+", required=True,
+                   help="study stores' checkpoints/ folders, searched in order for each training")
+    p.add_argument("--arms", nargs="+", required=True, choices=sorted(ARMS))
     p.add_argument("--seeds", nargs="+", type=int, required=True)
     p.add_argument("--budgets", nargs="+", type=int, required=True, help="env steps to cut the trainings at")
     p.add_argument("--out", type=Path, required=True, help="the per-seed CSV to write")
+    p.add_argument("--figure", type=Path, help="also draw the kept passes' validation returns per seed here")
+    p.add_argument("--references", type=Path, help="a learner-study per-seed CSV with the human-driven host's rows")
     a = p.parse_args(argv)
     bad = [b for b in a.budgets if b <= 0]
     if bad:
         p.error(f"--budgets {bad}: a budget is a positive number of env steps")
+    if a.references is not None and not a.references.is_file():
+        p.error(f"--references {a.references}: no such file")
     from hydra import compose, initialize_config_dir
 
     from hgm_repro.contracts.conf_dir import CONF_DIR
@@ -50,37 +90,48 @@ def main(argv: list[str] | None = None) -> None:
     from hgm_repro.evaluation.episodes import evaluate
     from hgm_repro.evaluation.reselection import best_pass, validation_passes
 
-    rows, choices = [], []
-    for seed in a.seeds:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            job = validate(compose("config", overrides=["experiment=quick", f"seed={seed}", "scenario=train",
-                                                        *ARMS[a.arm]]))
-        directory = a.checkpoints / train_key(job)
-        passes = validation_passes(directory) if directory.is_dir() else []
-        if not passes:
-            p.error(f"seed {seed}: no kept validation passes of arm {a.arm} in {directory} "
-                    "(train it with eval.keep_val_checkpoints=true)")
-        stale = [q.env_steps for q in passes if not q.current]
-        if stale:
-            p.error(f"seed {seed}: passes {stale} were scored by the blank-frame validation of evaluation version 1; "
-                    "score them again first (studies/revalidate.py)")
+    # Every training's passes first, so that a missing or stale one stops the run before any test.
+    trainings = {}
+    for arm in a.arms:
+        for seed in a.seeds:
+            with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+                job = validate(compose("config", overrides=["experiment=quick", f"seed={seed}", "scenario=train",
+                                                            *ARMS[arm]]))
+            key = train_key(job)
+            found = [d / key for d in a.checkpoints if validation_passes(d / key)]
+            if not found:
+                p.error(f"{arm} seed {seed}: no kept validation passes of training {key} in any of "
+                        f"{[str(d) for d in a.checkpoints]} (train it with eval.keep_val_checkpoints=true)")
+            passes = validation_passes(found[0])
+            stale = [q.env_steps for q in passes if not q.current]
+            if stale:
+                p.error(f"{arm} seed {seed}: passes {stale} in {found[0]} were scored by the blank-frame validation "
+                        "of evaluation version 1; score them again first (studies/revalidate.py)")
+            trainings[arm, seed] = (job, passes)
+
+    rows, curve = [], []
+    for (arm, seed), (job, passes) in trainings.items():
+        curve += [{"arm": arm, "seed": seed, "env_steps": q.env_steps, "val_return": q.val_return} for q in passes]
         tested: dict[Path, pd.Series] = {}
         for budget in a.budgets:
             try:
                 chosen = best_pass(passes, budget)
             except ConfigError as error:
-                p.error(f"seed {seed}: {error}")
+                p.error(f"{arm} seed {seed}: {error}")
             if chosen.path not in tested:  # budgets that choose the same pass share its (deterministic) test
                 tested[chosen.path] = evaluate(job, job.scenario, chosen.path).episodes[list(RESULTS)].mean()
             means = tested[chosen.path]
-            rows.append({"arm": cut_name(a.arm, budget), "seed": seed, **means.to_dict()})
-            choices.append(f"seed {seed}, {budget // 1000}k: the {chosen.env_steps // 1000}k pass "
-                           f"(validation {chosen.val_return:.0f}) tests at {means['episode_return']:.0f} "
-                           f"with {means['collisions']:.2f} collisions")
-            print(choices[-1], flush=True)
+            rows.append({"arm": cut_name(arm, budget), "seed": seed, "chosen_env_steps": chosen.env_steps,
+                         "val_return": chosen.val_return, **means.to_dict()})
+            print(f"{arm} seed {seed}, {budget // 1000}k: the {chosen.env_steps // 1000}k pass (validation "
+                  f"{chosen.val_return:.0f}) tests at {means['episode_return']:.0f} with {means['collisions']:.2f} "
+                  "collisions", flush=True)
     a.out.parent.mkdir(parents=True, exist_ok=True)
     pd.DataFrame(rows).to_csv(a.out, index=False, float_format="%.6g")
     print(f"wrote {a.out}")
+    if a.figure is not None:
+        _figure(pd.DataFrame(curve), pd.read_csv(a.references) if a.references else None, a.figure)
+        print(f"wrote {a.figure}")
 
 
 if __name__ == "__main__":
