@@ -86,7 +86,7 @@ def main(argv: list[str] | None = None) -> None:
     from hgm_repro.contracts.conf_dir import CONF_DIR
     from hgm_repro.contracts.errors import ConfigError
     from hgm_repro.contracts.schema import validate
-    from hgm_repro.contracts.train_key import train_key
+    from hgm_repro.contracts.train_key import EVALUATION_VERSION, train_key
     from hgm_repro.evaluation.episodes import evaluate
     from hgm_repro.evaluation.reselection import best_pass, validation_passes
 
@@ -122,7 +122,8 @@ def main(argv: list[str] | None = None) -> None:
                 tested[chosen.path] = evaluate(job, job.scenario, chosen.path).episodes[list(RESULTS)].mean()
             means = tested[chosen.path]
             rows.append({"arm": cut_name(arm, budget), "seed": seed, "chosen_env_steps": chosen.env_steps,
-                         "val_return": chosen.val_return, **means.to_dict()})
+                         "val_return": chosen.val_return, **means.to_dict(),
+                         "evaluation_version": EVALUATION_VERSION})
             print(f"{arm} seed {seed}, {budget // 1000}k: the {chosen.env_steps // 1000}k pass (validation "
                   f"{chosen.val_return:.0f}) tests at {means['episode_return']:.0f} with {means['collisions']:.2f} "
                   "collisions", flush=True)

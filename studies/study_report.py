@@ -112,10 +112,11 @@ def load(stores: list[Path]) -> tuple[pd.DataFrame, pd.DataFrame]:
                     for point in client.get_metric_history(r.info.run_id, m):
                         curves.append({"arm": arm, "seed": seed, "metric": m, "step": point.step,
                                        "value": point.value})
-    # A test made again after the evaluation fix (version 2: no blank frames) replaces the one before it.
+    # A test made again after the evaluation fix (version 2: no blank frames) replaces the one before it;
+    # the version stays with the row, so that a learned arm tested only before the fix is marked.
     tests = pd.DataFrame(results, columns=["arm", "seed", *RESULTS, "evaluation_version"])
     tests = tests.sort_values("evaluation_version", ascending=False, kind="stable")
-    return (tests.drop_duplicates(["arm", "seed"]).drop(columns="evaluation_version"),
+    return (tests.drop_duplicates(["arm", "seed"]),
             pd.DataFrame(curves, columns=["arm", "seed", "metric", "step", "value"]))
 
 
@@ -143,7 +144,8 @@ def earlier_results(per_seed_csv: Path, arms: list[str]) -> pd.DataFrame:
     missing = sorted(set(arms) - set(earlier["arm"]))
     if missing:
         raise SystemExit(f"{per_seed_csv} has no rows for {missing}; it has {sorted(set(earlier['arm']))}")
-    return earlier[earlier["arm"].isin(arms)][["arm", "seed", *RESULTS]]
+    kept = ["arm", "seed", *RESULTS, *(["evaluation_version"] if "evaluation_version" in earlier else [])]
+    return earlier[earlier["arm"].isin(arms)][kept]
 
 
 def _checkpoint_overrides(checkpoint: str) -> list[str]:
@@ -156,15 +158,27 @@ def _checkpoint_overrides(checkpoint: str) -> list[str]:
     return [f"eval.checkpoint={checkpoint}"]
 
 
+# The mark of a learned arm whose table row holds a test of evaluation version 1 (docs/interfaces.md).
+BLANK_FRAME_MARK = " (blank-frame test)"
+
+
+def _blank_frame_tested(arm: str, rows: pd.DataFrame) -> bool:
+    """A learned arm with a seed tested only by the evaluation of before commit ff718f2, which handed its
+    hosts blank frames (reference hosts read the simulator: their tests of any version are the same)."""
+    return (arm not in STUDY_REFERENCES and "evaluation_version" in rows
+            and bool((rows["evaluation_version"] == 1).any()))
+
+
 def markdown_table(results: pd.DataFrame, summary: pd.DataFrame) -> str:
     """The study's table as docs/study.md shows it: per seed `return, collisions`, the mean over seeds
-    with its 95% CI and the IQM, the collisions with their CI, and the seeds that meet issue 20's bar."""
+    with its 95% CI and the IQM, the collisions with their CI, and the seeds that meet issue 20's bar.
+    A learned arm with a blank-frame test (evaluation version 1) says so after its name."""
     seeds = sorted(results["seed"].unique())
     head = ["host", *map(str, seeds), "return: mean [95% CI], IQM", "collisions [95% CI]", "bar"]
     lines = ["| " + " | ".join(head) + " |", "| " + " | ".join(["---"] * (len(head) - 1) + ["---:"]) + " |"]
     per_seed = results.set_index(["arm", "seed"])
     for arm, row in summary.iterrows():
-        cells = [f"`{arm}`"]
+        cells = [f"`{arm}`" + (BLANK_FRAME_MARK if _blank_frame_tested(arm, results[results["arm"] == arm]) else "")]
         for seed in seeds:
             hit = per_seed.loc[(arm, seed)] if (arm, seed) in per_seed.index else None
             cells.append("" if hit is None else f"{hit['episode_return']:.0f}, {hit['collisions']:.2f}")
@@ -191,7 +205,7 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
         name, _, checkpoint = arm.partition("@")
         overrides = f"model={arm}" if arm in STUDY_REFERENCES else \
             " ".join(ARMS[name] + _checkpoint_overrides(checkpoint))
-        row = {"arm": arm, "overrides": overrides, "seeds": len(grp)}
+        row = {"arm": arm, "overrides": overrides, "seeds": len(grp), "blank_frame_test": _blank_frame_tested(arm, grp)}
         for m in RESULTS:
             est = mean_ci(grp[m].to_numpy(dtype=float))
             row[m] = est.point

@@ -54,6 +54,23 @@ def test_a_budget_cut_row_stands_in_the_table_after_the_arms_own_rows_and_says_w
     assert "| `r20_all_160k@best80k` | 200, 0.30 | 230, 0.10 | 231, 0.00 |" in table
 
 
+def test_a_learned_arm_with_a_blank_frame_test_says_so_and_a_reference_host_does_not(tmp_path):
+    """A row tested only by the evaluation of before the blank-frame fix (evaluation version 1) is marked
+    in the table and the summary, if it is a learned arm's: the reference hosts read the simulator."""
+    rows = (_rows("human", [240, 220, 230], [0, 0, 0]) + _rows("r20_all@best", [241, 300, 229], [0.1, 0.2, 0.0])
+            + _rows("r20_all", [200, 210, 220], [0.3, 0.3, 0.3]))
+    results = pd.DataFrame(rows).assign(evaluation_version=[1, 1, 1, 2, 1, 2, 2, 2, 2])
+    earlier = tmp_path / "learner_study_per_seed.csv"
+    results.to_csv(earlier, index=False)
+    study_report.report([], tmp_path / "out", study_report.earlier_results(earlier, ["human", "r20_all@best",
+                                                                                      "r20_all"]))
+    table = (tmp_path / "out" / "learner_study_table.md").read_text()
+    assert "| `r20_all@best` (blank-frame test) | 241, 0.10 |" in table
+    assert "| `r20_all` | 200, 0.30 |" in table and "| `human` | 240, 0.00 |" in table
+    summary = pd.read_csv(tmp_path / "out" / "learner_study_summary.csv").set_index("arm")
+    assert summary["blank_frame_test"].to_dict() == {"r20_all": False, "r20_all@best": True, "human": False}
+
+
 def test_an_arm_the_earlier_report_lacks_is_refused_by_name(tmp_path):
     earlier = tmp_path / "learner_study_per_seed.csv"
     pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0])).to_csv(earlier, index=False)
