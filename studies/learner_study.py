@@ -2,7 +2,7 @@
 
     python studies/learner_study.py run --arms base nstep --seeds 100 101 [--parallel 2] [--references]
     python studies/learner_study.py report [--store A.db B.db] [--out docs/study] \
-        [--earlier docs/study/r20/learner_study_per_seed.csv --earlier-arms r20_all@best]
+        [--earlier docs/study/r20/learner_study_per_seed.csv [MORE.csv] --earlier-arms r20_all@best]
 
 `run` trains and evaluates each (arm, seed) with `python -m hgm_repro` in the training traffic,
 into one SQLite store (`studies/runs/study.db` by default; the runs resume if interrupted);
@@ -98,9 +98,9 @@ def main(argv: list[str] | None = None) -> None:
     rep.add_argument("--store", type=Path, nargs="+", default=[RUNS / "study.db"],
                      help="one or more study stores (e.g. one per session)")
     rep.add_argument("--out", type=Path, default=ROOT / "docs" / "study")
-    rep.add_argument("--earlier", type=Path, metavar="PER_SEED_CSV",
-                     help="an earlier report's learner_study_per_seed.csv, whose --earlier-arms rows join the "
-                          "table (arms measured in a session whose store is gone)")
+    rep.add_argument("--earlier", type=Path, nargs="+", metavar="PER_SEED_CSV",
+                     help="earlier reports' learner_study_per_seed.csv (or studies/budget_cut.py's CSV), whose "
+                          "--earlier-arms rows join the table (arms measured in a session whose store is gone)")
     rep.add_argument("--earlier-arms", nargs="+", default=[], metavar="ARM",
                      help="the rows of --earlier to show, e.g. r20_all r20_all@best")
     a = p.parse_args(argv)

@@ -137,13 +137,16 @@ def _bar_count(grp: pd.DataFrame, results: pd.DataFrame) -> int:
     return int(sum(wins))
 
 
-def earlier_results(per_seed_csv: Path, arms: list[str]) -> pd.DataFrame:
-    """The rows of `arms` from an earlier report's learner_study_per_seed.csv: an arm measured in another
-    session (whose store is gone) stands beside the new ones in the table, from its committed numbers."""
-    earlier = pd.read_csv(per_seed_csv)
+def earlier_results(per_seed_csv: Path | list[Path], arms: list[str]) -> pd.DataFrame:
+    """The rows of `arms` from earlier reports' learner_study_per_seed.csv (or studies/budget_cut.py's CSV):
+    an arm measured in another session (whose store is gone) stands beside the new ones in the table, from
+    its committed numbers. Of several files, the first that has an (arm, seed) gives it."""
+    paths = [per_seed_csv] if isinstance(per_seed_csv, Path | str) else list(per_seed_csv)
+    earlier = pd.concat([pd.read_csv(path) for path in paths], ignore_index=True).drop_duplicates(["arm", "seed"])
     missing = sorted(set(arms) - set(earlier["arm"]))
     if missing:
-        raise SystemExit(f"{per_seed_csv} has no rows for {missing}; it has {sorted(set(earlier['arm']))}")
+        names = ", ".join(map(str, paths))
+        raise SystemExit(f"{names} has no rows for {missing}; it has {sorted(set(earlier['arm']))}")
     kept = ["arm", "seed", *RESULTS, *(["evaluation_version"] if "evaluation_version" in earlier else [])]
     return earlier[earlier["arm"].isin(arms)][kept]
 

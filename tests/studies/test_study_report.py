@@ -78,6 +78,18 @@ def test_an_arm_the_earlier_report_lacks_is_refused_by_name(tmp_path):
         study_report.earlier_results(earlier, ["r20_all"])
 
 
+def test_earlier_rows_come_from_several_files_the_first_file_winning_a_seed(tmp_path):
+    first, second = tmp_path / "a.csv", tmp_path / "b.csv"
+    pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0])).to_csv(first, index=False)
+    pd.DataFrame(_rows("human", [1, 1, 1], [0, 0, 0]) + _rows("r20_all@best80k", [10, 20, 30], [1, 1, 1])).to_csv(
+        second, index=False)
+    rows = study_report.earlier_results([first, second], ["human", "r20_all@best80k"]).set_index(["arm", "seed"])
+    assert list(rows.loc["human"]["episode_return"]) == [240, 220, 230]
+    assert list(rows.loc["r20_all@best80k"]["episode_return"]) == [10, 20, 30]
+    with pytest.raises(SystemExit, match=r"a.csv, .*b.csv has no rows for \['r20_all'\]"):
+        study_report.earlier_results([first, second], ["r20_all"])
+
+
 def test_an_earlier_row_fills_only_the_seeds_the_store_lacks(tmp_path):
     earlier = tmp_path / "learner_study_per_seed.csv"
     pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0]) + _rows("r20_all", [10, 20, 30], [1, 1, 1])).to_csv(
