@@ -218,11 +218,14 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
             row[f"{m}_iqm"], row[f"{m}_iqm_lo"], row[f"{m}_iqm_hi"] = est.point, est.low, est.high
         row["seeds_beating_human_under_0.2"] = _bar_count(grp, results)
         rows.append(row)
-    known = [a for a in (*[x for arm in ARMS for x in (arm, f"{arm}@best", f"{arm}@ema", f"{arm}@reselected")],
-                         *STUDY_REFERENCES)
-             if a in set(results["arm"])]
-    # Rows of other tests of an arm (studies/budget_cut.py's ARM@best80k) follow the known ones in name order.
-    order = known + sorted(set(results["arm"]) - set(known))
+    # Each arm's rows together: its own tests, then other tests of it (studies/budget_cut.py's ARM@best80k
+    # before ARM@best120k: shorter names first); the reference hosts last.
+    present = set(results["arm"])
+    own = {arm: [arm, f"{arm}@best", f"{arm}@ema", f"{arm}@reselected"] for arm in ARMS}
+    others = {arm: sorted((x for x in present - set(own[arm]) if x.partition("@")[0] == arm), key=lambda x: (len(x), x))
+              for arm in ARMS}
+    order = [a for arm in ARMS for a in (*own[arm], *others[arm]) if a in present] \
+        + [a for a in STUDY_REFERENCES if a in present]
     summary = pd.DataFrame(rows).set_index("arm").reindex(order)
     summary.reset_index().to_csv(out / "learner_study_summary.csv", index=False)
     (out / "learner_study_table.md").write_text(markdown_table(results, summary))

@@ -99,6 +99,7 @@ STUDY_TABLES = [("10", REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_stud
                 ("11", REPO_ROOT / "docs" / "study" / "r20_enriched_160k" / "learner_study_table.md"),
                 ("12", REPO_ROOT / "docs" / "study" / "r20_methods_160k" / "learner_study_table.md"),
                 ("14", REPO_ROOT / "docs" / "study" / "r20_reselect" / "learner_study_table.md"),
+                ("15", REPO_ROOT / "docs" / "study" / "r20_paper160" / "learner_study_table.md"),
                 ("15", REPO_ROOT / "docs" / "study" / "r20_methods_160k_v2" / "learner_study_table.md")]
 
 

@@ -35,9 +35,10 @@ def test_the_table_counts_a_seed_only_when_it_beats_that_seeds_human_host_under_
     assert cells[4] == "257 [229, 300], 257"  # the mean, its bootstrap CI, the IQM (3 seeds: none trimmed)
 
 
-def test_a_budget_cut_row_stands_in_the_table_after_the_arms_own_rows_and_says_what_it_tested(tmp_path):
+def test_a_budget_cut_row_stands_in_the_table_with_the_arms_own_rows_and_says_what_it_tested(tmp_path):
     """studies/budget_cut.py writes ARM@best80k rows (best.pt among the passes up to 80k): the report keeps
-    them (a summary limited to the known suffixes dropped them) and its overrides name the cut."""
+    them (a summary limited to the known suffixes dropped them), beside the arm's own rows and before the
+    reference hosts, and its overrides name the cut."""
     results = pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0]) + _rows("r20_all_160k@best", [250, 230, 240],
                                                                              [0.1, 0.0, 0.0])
                            + _rows("r20_all_160k@best80k", [200, 230, 231], [0.3, 0.1, 0.0]))
@@ -46,7 +47,7 @@ def test_a_budget_cut_row_stands_in_the_table_after_the_arms_own_rows_and_says_w
     arms = ["human", "r20_all_160k@best", "r20_all_160k@best80k"]
     study_report.report([], tmp_path / "out", study_report.earlier_results(earlier, arms))
     summary = pd.read_csv(tmp_path / "out" / "learner_study_summary.csv").set_index("arm")
-    assert list(summary.index) == ["r20_all_160k@best", "human", "r20_all_160k@best80k"]
+    assert list(summary.index) == ["r20_all_160k@best", "r20_all_160k@best80k", "human"]
     assert summary.loc["r20_all_160k@best80k", "seeds_beating_human_under_0.2"] == 2
     assert "passes up to 80k env steps" in summary.loc["r20_all_160k@best80k", "overrides"]
     assert summary.loc["r20_all_160k@best", "overrides"].endswith("eval.checkpoint=best")
