@@ -25,44 +25,13 @@ import sys
 from pathlib import Path
 
 import pandas as pd
-from study_arms import ARMS
-
-RESULTS = ("episode_return", "collisions", "dangerous_actions", "avg_speed_kmh", "lane_changes", "overtakes")
+from study_arms import ARMS, arm_job
+from study_report import RESULTS, validation_per_seed
 
 
 def cut_name(arm: str, budget: int) -> str:
     """The per-seed row name of `arm`'s best pass at or before `budget` env steps."""
     return f"{arm}@best{budget // 1000}k" if budget % 1000 == 0 else f"{arm}@best{budget}"
-
-
-def _figure(passes: pd.DataFrame, references: pd.DataFrame | None, path: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.ticker import FuncFormatter
-
-    seeds = sorted(passes["seed"].unique())
-    fig, axes = plt.subplots(1, len(seeds), figsize=(4.2 * len(seeds), 3.6), sharey=True, squeeze=False)
-    colours = dict(zip(passes["arm"].unique(), plt.rcParams["axes.prop_cycle"].by_key()["color"], strict=False))
-    for ax, seed in zip(axes[0], seeds, strict=True):
-        for arm, points in passes[passes["seed"] == seed].groupby("arm", sort=False):
-            points = points.sort_values("env_steps")
-            ax.plot(points["env_steps"], points["val_return"], marker=".", color=colours[arm], label=arm)
-        if references is not None:
-            human = references[(references["arm"] == "human") & (references["seed"] == seed)]["episode_return"]
-            if len(human):
-                ax.axhline(float(human.iloc[0]), color="black", linestyle="--", linewidth=1,
-                           label="human-driven host (test)")
-        ax.set_title(f"seed {seed}")
-        ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x / 1000:g}k"))
-        ax.set_xlabel("env steps")
-    axes[0][0].set_ylabel("greedy validation return")
-    axes[0][0].legend(fontsize=7)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -81,11 +50,7 @@ def main(argv: list[str] | None = None) -> None:
         p.error(f"--budgets {bad}: a budget is a positive number of env steps")
     if a.references is not None and not a.references.is_file():
         p.error(f"--references {a.references}: no such file")
-    from hydra import compose, initialize_config_dir
-
-    from hgm_repro.contracts.conf_dir import CONF_DIR
     from hgm_repro.contracts.errors import ConfigError
-    from hgm_repro.contracts.schema import validate
     from hgm_repro.contracts.train_key import EVALUATION_VERSION, train_key
     from hgm_repro.evaluation.episodes import evaluate
     from hgm_repro.evaluation.reselection import best_pass, validation_passes
@@ -94,9 +59,7 @@ def main(argv: list[str] | None = None) -> None:
     trainings = {}
     for arm in a.arms:
         for seed in a.seeds:
-            with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-                job = validate(compose("config", overrides=["experiment=quick", f"seed={seed}", "scenario=train",
-                                                            *ARMS[arm]]))
+            job = arm_job(arm, seed)
             key = train_key(job)
             found = [d / key for d in a.checkpoints if validation_passes(d / key)]
             if not found:
@@ -111,7 +74,8 @@ def main(argv: list[str] | None = None) -> None:
 
     rows, curve = [], []
     for (arm, seed), (job, passes) in trainings.items():
-        curve += [{"arm": arm, "seed": seed, "env_steps": q.env_steps, "val_return": q.val_return} for q in passes]
+        curve += [{"arm": arm, "seed": seed, "metric": "val/episode_return", "step": q.env_steps, "value": q.val_return}
+                  for q in passes]
         tested: dict[Path, pd.Series] = {}
         for budget in a.budgets:
             try:
@@ -131,7 +95,10 @@ def main(argv: list[str] | None = None) -> None:
     pd.DataFrame(rows).to_csv(a.out, index=False, float_format="%.6g")
     print(f"wrote {a.out}")
     if a.figure is not None:
-        _figure(pd.DataFrame(curve), pd.read_csv(a.references) if a.references else None, a.figure)
+        # The learner study's figure, drawn from the kept passes' scores instead of a store's logged curves.
+        references = pd.read_csv(a.references) if a.references else pd.DataFrame(columns=["arm", "seed", *RESULTS])
+        a.figure.parent.mkdir(parents=True, exist_ok=True)
+        validation_per_seed(references, pd.DataFrame(curve), a.figure)
         print(f"wrote {a.figure}")
 
 

@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from study_arms import ARMS
+from study_arms import ARMS, arm_job
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -25,16 +25,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--arm", required=True, choices=sorted(ARMS))
     p.add_argument("--seeds", nargs="+", type=int, required=True)
     a = p.parse_args(argv)
-    from hydra import compose, initialize_config_dir
-
-    from hgm_repro.contracts.conf_dir import CONF_DIR
-    from hgm_repro.contracts.schema import validate
     from hgm_repro.contracts.train_key import train_key
     from hgm_repro.evaluation.reselection import best_pass, revalidate
 
     for seed in a.seeds:
-        with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            job = validate(compose("config", overrides=["experiment=quick", f"seed={seed}", *ARMS[a.arm]]))
+        job = arm_job(a.arm, seed)
         directory = a.checkpoints / train_key(job)
         if not directory.is_dir():
             p.error(f"seed {seed}: no training of arm {a.arm} in {directory}")

@@ -5,8 +5,21 @@ Read by `learner_study.py` (which runs them) and `study_report.py` (which report
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def arm_job(arm: str, seed: int) -> Any:  # -> hgm_repro JobConfig (imported late: a script's --help stays fast)
+    """The validated job of `arm` on `seed` as the study runs it (the quick preset, the training traffic):
+    its train_key names the training's checkpoint folder, and its scenario is where the study tests."""
+    from hydra import compose, initialize_config_dir
+
+    from hgm_repro.contracts.conf_dir import CONF_DIR
+    from hgm_repro.contracts.schema import validate
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        return validate(compose("config", overrides=["experiment=quick", f"seed={seed}", "scenario=train", *ARMS[arm]]))
 
 # The camera the study proposes: aimed 15 degrees down (the horizon at about a third of the image
 # instead of half), a 60 degree field (a car 15 m ahead 1.7x larger than at 90 degrees, adjacent

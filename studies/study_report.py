@@ -181,7 +181,7 @@ def markdown_table(results: pd.DataFrame, summary: pd.DataFrame) -> str:
     lines = ["| " + " | ".join(head) + " |", "| " + " | ".join(["---"] * (len(head) - 1) + ["---:"]) + " |"]
     per_seed = results.set_index(["arm", "seed"])
     for arm, row in summary.iterrows():
-        cells = [f"`{arm}`" + (BLANK_FRAME_MARK if _blank_frame_tested(arm, results[results["arm"] == arm]) else "")]
+        cells = [f"`{arm}`" + (BLANK_FRAME_MARK if row["blank_frame_test"] else "")]
         for seed in seeds:
             hit = per_seed.loc[(arm, seed)] if (arm, seed) in per_seed.index else None
             cells.append("" if hit is None else f"{hit['episode_return']:.0f}, {hit['collisions']:.2f}")
@@ -245,11 +245,11 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(out / "learner_study_curves.png", dpi=110)
-    _validation_per_seed(results, curves, out / "learner_study_validation_per_seed.png")
+    validation_per_seed(results, curves, out / "learner_study_validation_per_seed.png")
     print(summary[["seeds", *RESULTS]].round(2).to_string())
 
 
-def _validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path) -> None:
+def validation_per_seed(results: pd.DataFrame, curves: pd.DataFrame, path: Path) -> None:
     """One panel per seed: each arm's greedy validation return against env steps, beside the
     human-driven host's test return on that seed (the bar), so that one can read at what budget a
     training reaches it. Validation and test draw different traffic (seeds + 200000 and + 100000),
