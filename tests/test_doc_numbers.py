@@ -94,6 +94,16 @@ def test_the_test_noise_margins_the_narrative_quotes_are_the_bundles(opening: st
 
 
 STUDY = REPO_ROOT / "docs" / "study.md"
+
+
+def _study_section(number: str) -> str:
+    """docs/study.md's section `number`, up to the next section."""
+    return STUDY.read_text().split(f"\n## {number}. ", 1)[1].split("\n## ", 1)[0]
+
+
+def _margin_cell(row: pd.Series) -> str:
+    """A test-length table's cell: a seed's margin over the human-driven host [95% interval], collisions."""
+    return f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], {row['collisions']:.2f}"
 # Each study section's tables that the study report wrote, as (section, the report's file).
 STUDY_TABLES = [("10", REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md"),
                 ("11", REPO_ROOT / "docs" / "study" / "r20_enriched_160k" / "learner_study_table.md"),
@@ -107,7 +117,7 @@ STUDY_TABLES = [("10", REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_stud
 def test_a_study_sections_table_is_the_one_the_study_report_wrote(section: str, path):
     if not path.is_file():
         pytest.skip(f"no committed study table {path.name} for section {section}")
-    text = STUDY.read_text().split(f"\n## {section}. ", 1)[1].split("\n## ", 1)[0]
+    text = _study_section(section)
     assert path.read_text().strip() in text, f"docs/study.md section {section}'s table differs from {path}"
 
 
@@ -119,15 +129,13 @@ PUBLISHED_BEFORE_FIX = TEST_LENGTH.parent / "published_before_fix.csv"
 def test_the_test_length_sections_table_is_its_csv_and_its_short_test_is_the_published_one():
     study = pd.read_csv(TEST_LENGTH)
     mine = study[study["model"] == "proposed_enriched"]
-    text = STUDY.read_text().split("\n## 13. ", 1)[1].split("\n## ", 1)[0]
+    text = _study_section("13")
 
-    def cell(row: pd.Series) -> str:
-        return (f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], "
-                f"{row['collisions']:.2f}")
 
     by_test = {test: part.set_index("seed") for test, part in mine.groupby("test")}
     for seed in by_test["preset"].index:
-        assert f"| {seed} | {cell(by_test['preset'].loc[seed])} | {cell(by_test['long'].loc[seed])} |" in text, seed
+        cells = [_margin_cell(by_test[test].loc[seed]) for test in ("preset", "long")]
+        assert f"| {seed} | " + " | ".join(cells) + " |" in text, seed
     # The re-test's first episodes are the preset's test: they must give the numbers published then (before
     # the evaluation fix; docs/results has been published again since, and that bundle's rows are kept).
     published = pd.read_csv(PUBLISHED_BEFORE_FIX, dtype={"scenario": str})
@@ -146,15 +154,14 @@ def test_the_fixed_re_tests_table_is_both_csvs_and_the_human_host_did_not_move()
     """Section 14: the published variant networks before and after the blank-frame fix. The human-driven
     host reads the simulator, not observations: its test must not move by a digit."""
     before, after = (pd.read_csv(path) for path in (TEST_LENGTH, TEST_LENGTH_V2))
-    text = STUDY.read_text().split("\n## 14. ", 1)[1].split("\n## ", 1)[0]
+    text = _study_section("14")
 
-    def cell(row: pd.Series) -> str:
-        return f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], {row['collisions']:.2f}"
 
     tables = {(when, test): part.set_index("seed") for when, frame in (("before", before), ("after", after))
               for test, part in frame[frame["model"] == "proposed_enriched"].groupby("test")}
     for seed in tables["before", "preset"].index:
-        cells = [cell(tables[when, test].loc[seed]) for test in ("preset", "long") for when in ("before", "after")]
+        cells = [_margin_cell(tables[when, test].loc[seed])
+                 for test in ("preset", "long") for when in ("before", "after")]
         assert f"| {seed} | " + " | ".join(cells) + " |" in text, seed
     for test in ("preset", "long"):
         assert (tables["before", test]["ref_return"] - tables["after", test]["ref_return"]).abs().max() < 1e-3
@@ -169,14 +176,13 @@ def test_the_paper_hgm_re_tests_table_is_its_csv_and_its_short_test_is_the_publi
     """Section 15: the published paper-HGM networks of scenario 3 re-tested on 160 episodes. The re-test's
     first 48 episodes are the published test, so they must give docs/results' numbers for both hosts."""
     study = pd.read_csv(TEST_LENGTH_PAPER)
-    text = STUDY.read_text().split("\n## 15. ", 1)[1].split("\n## ", 1)[0]
+    text = _study_section("15")
 
-    def cell(row: pd.Series) -> str:
-        return f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], {row['collisions']:.2f}"
 
     tables = {test: part.set_index("seed") for test, part in study[study["model"] == "proposed"].groupby("test")}
     for seed in tables["preset"].index:
-        assert f"| {seed} | {cell(tables['preset'].loc[seed])} | {cell(tables['long'].loc[seed])} |" in text, seed
+        cells = [_margin_cell(tables[test].loc[seed]) for test in ("preset", "long")]
+        assert f"| {seed} | " + " | ".join(cells) + " |" in text, seed
     evals = _evals()
     s3 = evals[evals["scenario"] == "3"].set_index(["model", "seed"])
     for seed, row in tables["preset"].iterrows():
