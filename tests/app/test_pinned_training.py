@@ -1,0 +1,59 @@
+"""The smoke training through the whole job (the trainings service, the learner, the store), pinned
+bit for bit: a refactor of the app or the learner loop must train and log exactly what it did."""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import torch
+from hydra import compose, initialize_config_dir
+
+from hgm_repro.app.job import run_job
+from hgm_repro.contracts.checkpoint import load_checkpoint
+from hgm_repro.contracts.conf_dir import CONF_DIR
+
+# Everything that could change the numbers is spelled out, not left to a default.
+PINNED_JOB = ("experiment=smoke", "seed=11", "scenario='3'", "device=cpu", "runtime.torch_threads=1",
+              "runtime.update_dtype=float32", "runtime.compile=false", "runtime.grouped=false",
+              "tracking.log_gif=false", "tracking.log_model=false")
+# Recorded from the code before the trainings service and the learner's progress refactor, on this
+# machine's torch (2.x, CPU): sha256 of the final network's tensors in state_dict order, of every
+# train/ and val/ metric's history, and of the evaluation's means.
+PINNED_WEIGHTS = "673eca68ef6273ee"
+PINNED_CURVES = "2f115ca995bc2eff"
+PINNED_EVALUATION = "b46c4ff3d26a2985"
+
+
+def _digest(data: bytes) -> str:
+    return hashlib.sha256(data).hexdigest()[:16]
+
+
+def fingerprint(launch: Path) -> dict[str, str]:
+    """What one pinned job left: its final weights, its training curves and its test means, each hashed."""
+    from mlflow.tracking import MlflowClient
+
+    with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
+        cfg = compose("config", overrides=[*PINNED_JOB, f"tracking.uri=sqlite:///{launch}/mlflow.db"])
+    before = torch.get_num_threads()
+    try:
+        outcome = run_job(cfg, launch)
+    finally:
+        torch.set_num_threads(before)
+    network = load_checkpoint(outcome.training.checkpoint)["network"]
+    client = MlflowClient(tracking_uri=f"sqlite:///{launch}/mlflow.db")
+    train_run = client.get_run(outcome.training.run_id)
+    curves = {key: [(m.step, m.value) for m in client.get_metric_history(outcome.training.run_id, key)]
+              for key in sorted(train_run.data.metrics) if key.startswith(("train/", "val/"))}
+    curves = {k: v for k, v in curves.items() if k != "train/steps_per_s"}  # wall-clock, not the training
+    return {
+        "weights": _digest(b"".join(t.numpy().tobytes() for t in network.values())),
+        "curves": _digest(json.dumps(curves, sort_keys=True).encode()),
+        "evaluation": _digest(json.dumps(outcome.means, sort_keys=True).encode()),
+    }
+
+
+def test_the_smoke_training_is_bit_for_bit_the_pinned_one(tmp_path: Path):
+    assert fingerprint(tmp_path.resolve()) == {
+        "weights": PINNED_WEIGHTS, "curves": PINNED_CURVES, "evaluation": PINNED_EVALUATION}
