@@ -35,25 +35,24 @@ VAL_SEED_OFFSET = 200_000
 # Reselection traffic (eval.checkpoint=reselected): the training traffic again, on seeds that neither
 # the validation passes whose best it re-checks nor any test uses, so that it does not re-count their luck.
 RESELECT_SEED_OFFSET = 300_000
-# A grouped member's exploration draws (its own generator, so that members do not share one stream).
-EXPLORATION_SEED_OFFSET = 500_000
 # Film a different episode than evaluation's first one, but the same one on every run of the job.
 GIF_SEED_OFFSET = 7919
 
-# Config keys that moved to another group (issue 21: groups by concern), as stores written before
-# logged them -> where they are now: what reads old runs' params translates them with this.
+# Config keys that moved out of the `learner` group into the groups by concern (`eval`, `runtime`,
+# `logging`), as stores written before the move logged them -> where they are now: what reads old
+# runs' params translates them with this.
 MOVED_CONFIG_KEYS = {
-    "eval.test_steps": "eval.test_steps", "eval.test_envs": "eval.test_envs",
-    "eval.val_every": "eval.val_every", "eval.val_envs": "eval.val_envs",
-    "eval.val_episodes": "eval.val_episodes",
-    "runtime.torch_threads": "runtime.torch_threads", "runtime.compile": "runtime.compile",
-    "runtime.cuda_graph": "runtime.cuda_graph", "runtime.update_dtype": "runtime.update_dtype",
-    "runtime.grouped": "runtime.grouped", "runtime.replay_frames": "runtime.replay_frames",
-    "runtime.checkpoint_buffer_max_mb": "runtime.checkpoint_buffer_max_mb",
-    "logging.log_every": "logging.log_every", "logging.checkpoint_every": "logging.checkpoint_every",
+    "learner.test_steps": "eval.test_steps", "learner.test_envs": "eval.test_envs",
+    "learner.eval_every": "eval.val_every", "learner.val_envs": "eval.val_envs",
+    "learner.val_episodes": "eval.val_episodes",
+    "learner.torch_threads": "runtime.torch_threads", "learner.compile": "runtime.compile",
+    "learner.cuda_graph": "runtime.cuda_graph", "learner.update_dtype": "runtime.update_dtype",
+    "learner.grouped": "runtime.grouped", "learner.replay_frames": "runtime.replay_frames",
+    "learner.checkpoint_buffer_max_mb": "runtime.checkpoint_buffer_max_mb",
+    "learner.log_every": "logging.log_every", "learner.checkpoint_every": "logging.checkpoint_every",
 }
 
 
 def current_key(key: str) -> str:
-    """A logged config key under its name today (`eval.val_every` -> `eval.val_every`)."""
+    """A logged config key under its name today (`learner.eval_every` -> `eval.val_every`)."""
     return MOVED_CONFIG_KEYS.get(key, key)

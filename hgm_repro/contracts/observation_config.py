@@ -103,9 +103,6 @@ class ObservationConfig:
                              "to reach above the camera)")
         if finite_number("observation.camera_max_range", self.camera_max_range) <= 0:
             raise ValueError(f"observation.camera_max_range={self.camera_max_range} is not allowed: need > 0 (m)")
-        if self.camera == "none" and self.hgm == "none" and not self.coordinates:
-            # A non-learning driver needs no observation; that is fine, the builder then makes none.
-            pass
 
     @property
     def keys(self) -> tuple[str, ...]:
