@@ -1,14 +1,16 @@
 """The paper's seven claims, each judged from our runs with the numbers behind the verdict.
 
 Every claim is broken into comparisons. Each comparison is an `Estimate` of a difference signed
-so that a positive value is what the paper claims. The rule for one comparison:
+so that a positive value is what the paper claims, with its 95 % Student-t interval over seeds
+(`analysis.stats`). The rule for one comparison:
 
-- supported:      at least MIN_SEEDS seeds per group and the 95 % CI lies above 0;
-- not supported:  at least MIN_SEEDS seeds per group and the 95 % CI lies below 0;
-- inconclusive:   otherwise (CI covers 0, too few seeds for a CI, or data missing).
+- supported:      at least MIN_SEEDS seeds per group and the interval lies above 0;
+- not supported:  at least MIN_SEEDS seeds per group and the interval lies below 0;
+- tie:            at least MIN_SEEDS seeds per group and the interval covers 0;
+- inconclusive:   too few seeds for an interval, or data missing.
 
-A claim made of several comparisons ("faster than both", "in every scenario") is supported
-only if all of them are, not supported if any one is, and inconclusive otherwise.
+A claim made of several comparisons ("faster than both", "in every scenario") is supported only if
+all of them are, not supported if any one is, inconclusive if any lacks data, and a tie otherwise.
 """
 
 from __future__ import annotations
@@ -27,8 +29,12 @@ from analysis.tables import per_scenario
 
 SUPPORTED = "supported"
 NOT_SUPPORTED = "not supported"
+TIE = "tie"
 INCONCLUSIVE = "inconclusive"
-MIN_SEEDS = 3  # below this a percentile bootstrap over seeds is too optimistic to decide on
+VERDICTS = (SUPPORTED, NOT_SUPPORTED, TIE, INCONCLUSIVE)
+# Two seeds give a valid t interval, but with one degree of freedom it is so wide that a verdict from it
+# rests on which two networks happened to be trained: three seeds is the least a verdict is read from.
+MIN_SEEDS = 3
 
 CLAIMS = {
     1: "All three learned methods drive faster than the non-intelligent (human-driven) host.",
@@ -51,14 +57,22 @@ class Comparison:
     reason: str
     digits: int = 2
 
+    def number(self) -> str:
+        """'1.5 [1.1, 2.0]', the point with its interval (or why there is none)."""
+        e = self.estimate
+        if np.isnan(e.point):
+            return "no data"
+        ci = (f"[{fmt(e.low, digits=self.digits)}, {fmt(e.high, digits=self.digits)}]" if e.has_ci
+              else "no interval")
+        return f"{fmt(e.point, digits=self.digits)} {ci}"
+
     def text(self) -> str:
         e = self.estimate
         if np.isnan(e.point):
             return f"{self.label}: no data -> {self.verdict}"
-        ci = (f"[{fmt(e.low, digits=self.digits)}, {fmt(e.high, digits=self.digits)}]" if e.has_ci
-              else "no CI")
-        why = "" if self.verdict == SUPPORTED else f" ({self.reason})"
-        return f"{self.label}: {fmt(e.point, digits=self.digits)} {ci}, n={e.n} -> {self.verdict}{why}"
+        # Only an undecided comparison needs its reason; the others say it in the verdict word.
+        why = f" ({self.reason})" if self.verdict in (INCONCLUSIVE, NOT_SUPPORTED) else ""
+        return f"{self.label}: {self.number()}, n={e.n} -> {self.verdict}{why}"
 
 
 @dataclass
@@ -80,10 +94,10 @@ def judge(estimate: Estimate, min_seeds: int = MIN_SEEDS) -> tuple[str, str]:
         return INCONCLUSIVE, f"{estimate.n} seed{'s' if estimate.n != 1 else ''}: {what}"
     side = estimate.excludes_zero()
     if side > 0:
-        return SUPPORTED, "CI above 0"
+        return SUPPORTED, "interval above 0"
     if side < 0:
-        return NOT_SUPPORTED, "CI below 0 (the opposite holds)"
-    return INCONCLUSIVE, "CI covers 0"
+        return NOT_SUPPORTED, "the opposite holds"
+    return TIE, "interval covers 0"
 
 
 def combine(verdicts: list[str]) -> str:
@@ -93,7 +107,9 @@ def combine(verdicts: list[str]) -> str:
         return NOT_SUPPORTED
     if all(v == SUPPORTED for v in verdicts):
         return SUPPORTED
-    return INCONCLUSIVE
+    if INCONCLUSIVE in verdicts:
+        return INCONCLUSIVE
+    return TIE
 
 
 def _compare(label: str, estimate: Estimate, min_seeds: int, digits: int = 2) -> Comparison:
@@ -127,7 +143,7 @@ def claim1(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
                       _eval_diff(evals, m, "human", "avg_speed_kmh", sc), min_seeds, 1)
              for m in ("proposed", "min", "coordinate")]
     return _claim(1, "Mean test speed (km/h) of each learned method minus the human-driven host's, averaged "
-                     "over the test scenarios both hold; all three CIs must lie above 0.", comps)
+                     "over the test scenarios both hold; all three intervals must lie above 0.", comps)
 
 
 def claim2(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimResult:
@@ -142,7 +158,7 @@ def claim2(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
                               _curve_diff(final, "proposed", other), min_seeds, 2))
     return _claim(2, "Learning speed = mean of the binned training speed curve up to the step every run "
                      "reached (normalised area); level = mean speed over each run's last 10 % of steps. "
-                     "Proposed minus each other method; all four CIs must lie above 0.", comps)
+                     "Proposed minus each other method; all four intervals must lie above 0.", comps)
 
 
 def claim3(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimResult:
@@ -156,7 +172,7 @@ def claim3(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
         comps.append(_compare(f"{o} - Proposed, test lane changes",
                               _eval_diff(evals, other, "proposed", "lane_changes", sc), min_seeds, 2))
     return _claim(3, "Lane changes per episode of each other method minus proposed's, at the end of training "
-                     "(last 10 % of steps) and in test (mean over scenarios); all CIs must lie above 0.", comps)
+                     "(last 10 % of steps) and in test (mean over scenarios); all intervals must lie above 0.", comps)
 
 
 def claim4(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimResult:
@@ -166,7 +182,7 @@ def claim4(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
              for other in ("proposed", "coordinate")]
     return _claim(4, "Fluctuation = standard deviation of the step-to-step changes of the binned training "
                      "overtake curve (as drawn in the overtakes figure), per seed. Min minus each other "
-                     "method; both CIs must lie above 0.", comps)
+                     "method; both intervals must lie above 0.", comps)
 
 
 def claim5(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimResult:
@@ -179,10 +195,9 @@ def claim5(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
         poi = probability_of_improvement(per_scenario(evals, "proposed", "episode_return"),
                                          per_scenario(evals, other, "episode_return"))
         if not np.isnan(poi.point):
-            ci = f"[{fmt(poi.low, digits=2)}, {fmt(poi.high, digits=2)}]" if poi.has_ci else "no CI"
-            notes.append(f"P(Proposed > {o}) over scenarios: {fmt(poi.point, digits=2)} {ci}")
+            notes.append(f"P(Proposed > {o}) over scenarios: {fmt(poi.point, digits=2)} (a point; no interval)")
     return _claim(5, "Mean test episode return of proposed minus each other method, separately in each of the "
-                     "five scenarios; all ten CIs must lie above 0 (a missing scenario makes it inconclusive).",
+                     "five scenarios; all ten intervals must lie above 0 (a missing scenario makes it inconclusive).",
                   comps, notes)
 
 
@@ -200,23 +215,21 @@ def claim6(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
     gap = _compare("Proposed slope - Min slope", slope_difference_ci(prop, mn), min_seeds, 1)
     min_slope = slope_ci(mn)
     flat_verdict, flat_reason = judge(min_slope, min_seeds)
-    # "Flat" is the absence of a trend: a Min slope CI that covers 0 is what the claim expects,
-    # a CI clear of 0 in either direction contradicts it.
-    if flat_verdict == SUPPORTED or flat_verdict == NOT_SUPPORTED:
-        flat = Comparison("Min slope of return vs CV ratio (flat = CI covers 0)", min_slope, NOT_SUPPORTED,
-                          "CI excludes 0: Min is not flat", 1)
-    elif flat_reason == "CI covers 0":
-        flat = Comparison("Min slope of return vs CV ratio (flat = CI covers 0)", min_slope, SUPPORTED,
-                          "CI covers 0", 1)
+    # "Flat" is the absence of a trend: a Min slope that ties with 0 is what the claim expects, an
+    # interval clear of 0 in either direction contradicts it.
+    label = "Min slope of return vs CV ratio (flat = interval covers 0)"
+    if flat_verdict in (SUPPORTED, NOT_SUPPORTED):
+        flat = Comparison(label, min_slope, NOT_SUPPORTED, "interval excludes 0: Min is not flat", 1)
+    elif flat_verdict == TIE:
+        flat = Comparison(label, min_slope, SUPPORTED, "interval covers 0", 1)
     else:
-        flat = Comparison("Min slope of return vs CV ratio (flat = CI covers 0)", min_slope, INCONCLUSIVE,
-                          flat_reason, 1)
+        flat = Comparison(label, min_slope, INCONCLUSIVE, flat_reason, 1)
     comps = [rise, flat, gap]
     notes = [] if len(prop) == 5 else [f"proposed evaluated in {len(prop)} of 5 scenarios"]
-    return _claim(6, "Least-squares slope of the mean test return against the CV ratio (0 to 1), seeds "
-                     "resampled within each scenario. Supported if proposed's slope CI lies above 0, Min's "
-                     "slope CI covers 0 (flat), and the slope difference CI lies above 0 (so 'flat' is not "
-                     "just noise).", comps, notes)
+    return _claim(6, "Least-squares slope of the test return against the CV ratio (0 to 1), per seed (one "
+                     "network tested in all five scenarios), then the interval over seeds. Supported if "
+                     "proposed's slope lies above 0, Min's covers 0 (flat), and the slope difference lies "
+                     "above 0 (so 'flat' is not just noise).", comps, notes)
 
 
 def claim7(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimResult:
@@ -227,10 +240,9 @@ def claim7(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int) -> ClaimRe
                                      per_scenario(evals, "coordinate", "episode_return", sc))
     notes = []
     if not np.isnan(poi.point):
-        ci = f"[{fmt(poi.low, digits=2)}, {fmt(poi.high, digits=2)}]" if poi.has_ci else "no CI"
-        notes.append(f"P(Proposed > Coordinate): {fmt(poi.point, digits=2)} {ci}")
-    return _claim(7, "Mean test episode return of proposed minus Coordinate, averaged over scenarios "
-                     "(stratified bootstrap); the CI must lie above 0.", comps, notes)
+        notes.append(f"P(Proposed > Coordinate): {fmt(poi.point, digits=2)} (a point; no interval)")
+    return _claim(7, "Mean test episode return of proposed minus Coordinate, each seed averaged over the "
+                     "scenarios first; the interval must lie above 0.", comps, notes)
 
 
 CHECKS: dict[int, Callable[[pd.DataFrame, pd.DataFrame, int], ClaimResult]] = {
@@ -247,3 +259,31 @@ def evaluate_claims(evals: pd.DataFrame, curves: pd.DataFrame, min_seeds: int = 
 def claims_table(results: list[ClaimResult]) -> pd.DataFrame:
     return pd.DataFrame([{"claim": r.number, "statement": r.statement, "verdict": r.verdict,
                           "evidence": "; ".join(c.text() for c in r.comparisons)} for r in results])
+
+
+def _first(comparisons: list[Comparison], verdict: str) -> Comparison | None:
+    return next((c for c in comparisons if c.verdict == verdict), None)
+
+
+def verdict_sentence(result: ClaimResult) -> str:
+    """What decides the verdict, in one sentence with the number behind it."""
+    comps, total = result.comparisons, len(result.comparisons)
+    of = f"of {total} difference{'s' if total != 1 else ''}"
+    if result.verdict == SUPPORTED:
+        # The difference closest to failing is the one worth quoting.
+        closest = min(comps, key=lambda c: abs(c.estimate.low) if c.estimate.has_ci else np.inf)
+        what = "the one" if total == 1 else f"all {total} differences"
+        return f"{what.capitalize()} it needs lie above 0 (closest to 0: {closest.label}, {closest.number()})."
+    if result.verdict == NOT_SUPPORTED:
+        against = [c for c in comps if c.verdict == NOT_SUPPORTED]
+        first = against[0]
+        return f"The opposite holds in {len(against)} {of} ({first.label}, {first.number()})."
+    if result.verdict == TIE:
+        ties = [c for c in comps if c.verdict == TIE]
+        held = sum(c.verdict == SUPPORTED for c in comps)
+        first = ties[0]
+        rest = f"; the other {held} hold" if held else ""
+        return (f"{len(ties)} {of} cannot be told from 0 with these seeds ({first.label}, {first.number()})"
+                f"{rest}.")
+    missing = _first(comps, INCONCLUSIVE)
+    return f"Not decided: {missing.label}: {missing.reason}." if missing else "Not decided: no data."

@@ -72,8 +72,8 @@ def fluctuation_values(curves: pd.DataFrame, metric: str) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=["model", "seed", "run_id", "value"])
 
 
-def by_model(values: pd.DataFrame, model: str) -> dict[str, np.ndarray]:
-    """One stratum ('train') of per-seed values, the shape the stats functions take."""
-    arr = values.loc[values["model"] == model, "value"].to_numpy(dtype=float)
-    arr = arr[np.isfinite(arr)]
-    return {"train": arr} if arr.size else {}
+def by_model(values: pd.DataFrame, model: str) -> dict[str, pd.Series]:
+    """One stratum ('train') of per-seed values indexed by seed, the shape the stats functions take."""
+    part = values[(values["model"] == model) & np.isfinite(values["value"].astype(float))]
+    series = part.groupby("seed")["value"].mean().astype(float)
+    return {"train": series} if series.size else {}

@@ -15,7 +15,7 @@ from analysis.claims import claims_table, evaluate_claims
 from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
 from analysis.figures import TRAINING_FIGURES, make_figures
-from analysis.labels import LEARNED, REFERENCE_HOSTS, SCENARIOS, model_label, ordered_models
+from analysis.labels import LEARNED, REFERENCE_HOSTS, SCENARIOS, fmt, model_label, ordered_models
 from analysis.load import EVAL_METRICS, StoreData
 from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
@@ -119,10 +119,11 @@ def _aggregate_text(evals: pd.DataFrame, scenarios: list[str]) -> pd.DataFrame:
     return pd.DataFrame({
         "Method": [model_label(x, short=True) for x in agg["model"]],
         "Scenarios": agg["scenarios"].astype(str),
-        "Mean [CI]": [fmt_estimate(r.mean, r.mean_low, r.mean_high, r.min_seeds, m) for r in agg.itertuples()],
-        "IQM [CI]": [fmt_estimate(r.iqm, r.iqm_low, r.iqm_high, r.min_seeds, m) for r in agg.itertuples()],
-        "P(Proposed > X) [CI]": [fmt_estimate(r.p_improve, r.p_low, r.p_high, r.min_seeds, digits=2)
-                                 if np.isfinite(r.p_improve) else "-" for r in agg.itertuples()],
+        "Mean [95% interval]": [fmt_estimate(r.mean, r.mean_low, r.mean_high, r.min_seeds, m)
+                                for r in agg.itertuples()],
+        "IQM": [fmt(r.iqm, m) for r in agg.itertuples()],
+        "P(Proposed > X)": [fmt(r.p_improve, digits=2) if np.isfinite(r.p_improve) else "-"
+                            for r in agg.itertuples()],
     })
 
 

@@ -9,7 +9,7 @@ import pandas as pd
 
 from analysis.labels import fmt, model_label, ordered_models, ordered_scenarios
 from analysis.load import EVAL_METRICS
-from analysis.stats import Estimate, iqm_ci, mean_ci, probability_of_improvement, stratified_mean_ci, test_noise_ci
+from analysis.stats import NO_DATA, iqm, mean_ci, probability_of_improvement, stratified_mean_ci, test_noise_ci
 
 # The paper's Table 6 (test score per scenario; the paper does not name the unit).
 PAPER_TABLE6 = pd.DataFrame(
@@ -20,18 +20,19 @@ PAPER_TABLE6 = pd.DataFrame(
 
 
 def per_scenario(evals: pd.DataFrame, model: str, metric: str,
-                 scenarios: list[str] | None = None) -> dict[str, np.ndarray]:
-    """Per-seed values of one metric for one model, keyed by scenario (the bootstrap strata)."""
+                 scenarios: list[str] | None = None) -> dict[str, pd.Series]:
+    """Per-seed values of one metric for one model, keyed by scenario, each a Series indexed by seed
+    (so that two methods pair seed by seed: the same seed drew the same test traffic)."""
     rows = evals[(evals["model"] == model) & evals[metric].notna()] if metric in evals else evals.iloc[:0]
     out = {}
     for scenario, group in rows.groupby("scenario"):
         if scenarios is None or str(scenario) in scenarios:
-            out[str(scenario)] = group[metric].to_numpy(dtype=float)
+            out[str(scenario)] = group.groupby("seed")[metric].mean().astype(float)
     return out
 
 
 def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.DataFrame:
-    """Long table: model, scenario, metric, n_seeds, mean, low, high (95 % bootstrap CI over seeds)."""
+    """Long table: model, scenario, metric, n_seeds, mean, low, high (95 % t interval over seeds)."""
     rows = []
     for (model, scenario), group in evals.groupby(["model", "scenario"]):
         for metric in metrics:
@@ -41,6 +42,30 @@ def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.
             rows.append({"model": model, "scenario": str(scenario), "metric": metric, "n_seeds": est.n,
                          "mean": est.point, "low": est.low, "high": est.high})
     return pd.DataFrame(rows, columns=["model", "scenario", "metric", "n_seeds", "mean", "low", "high"])
+
+
+# The scenario the headline reads beside the mean over scenarios: the paper's middle mix (CV ratio 0.5),
+# the same traffic as the training mix (conf/scenario/train.yaml).
+HEADLINE_SCENARIO = "3"
+HEADLINE_METRICS = ("episode_return", "collisions")
+
+
+def headline(evals: pd.DataFrame, scenarios: list[str], scenario: str = HEADLINE_SCENARIO,
+             metrics: tuple[str, ...] = HEADLINE_METRICS) -> pd.DataFrame:
+    """One row per host: for each metric, the mean over seeds in `scenario` and the mean over `scenarios`
+    (each seed averaged over them first), with their t intervals: columns `<metric>/<where>/<point|low|high|n>`
+    with where = 'scenario' or 'mean'."""
+    rows = []
+    for model in ordered_models(evals["model"]):
+        row: dict[str, object] = {"model": model}
+        for metric in metrics:
+            by_scenario = per_scenario(evals, model, metric, scenarios)
+            for where, est in (("scenario", mean_ci(by_scenario.get(scenario, []))),
+                               ("mean", stratified_mean_ci(by_scenario))):
+                for part in ("point", "low", "high", "n"):
+                    row[f"{metric}/{where}/{part}"] = getattr(est, part)
+        rows.append(row)
+    return pd.DataFrame(rows)
 
 
 def cell_text(mean: float, low: float, high: float, n: int, metric: str) -> str:
@@ -74,7 +99,9 @@ def seed_counts(evals: pd.DataFrame, scenarios: list[str] | None = None) -> pd.D
 
 def aggregate(evals: pd.DataFrame, metric: str, scenarios: list[str],
               baseline: str = "proposed") -> pd.DataFrame:
-    """Across-scenario summaries per method: mean, IQM, and P(baseline > method), all with CIs."""
+    """Across-scenario summaries per method: the mean (each seed averaged over the scenarios, then the t
+    interval over seeds), the IQM and P(baseline > method); the last two are points (no interval for them
+    has been shown to cover at five seeds)."""
     rows = []
     base = per_scenario(evals, baseline, metric, scenarios)
     for model in ordered_models(evals["model"]):
@@ -82,13 +109,11 @@ def aggregate(evals: pd.DataFrame, metric: str, scenarios: list[str],
         if not scores:
             continue
         mean = stratified_mean_ci(scores)
-        iq = iqm_ci(scores)
-        poi = (probability_of_improvement(base, scores) if model != baseline and base
-               else Estimate(np.nan, np.nan, np.nan, 0))
+        poi = probability_of_improvement(base, scores) if model != baseline and base else NO_DATA
         rows.append({"model": model, "scenarios": len(scores), "min_seeds": mean.n,
                      "mean": mean.point, "mean_low": mean.low, "mean_high": mean.high,
-                     "iqm": iq.point, "iqm_low": iq.low, "iqm_high": iq.high,
-                     "p_improve": poi.point, "p_low": poi.low, "p_high": poi.high})
+                     "iqm": iqm(np.concatenate([s.to_numpy(float) for s in scores.values()])),
+                     "p_improve": poi.point})
     return pd.DataFrame(rows)
 
 
@@ -96,11 +121,13 @@ def aggregate(evals: pd.DataFrame, metric: str, scenarios: list[str],
 # more test return than that seed's human-driven host in the same scenario, with under this many
 # collisions per episode (the human-driven host, under its safety layer, has none).
 SAFE_COLLISIONS = 0.2
-# What '(c close)' in a cell of the seed-by-seed comparison means.
-CLOSE_NOTE = (f"(c close): on c of those seeds the host is safe (under {SAFE_COLLISIONS:g} collisions per "
-              "episode) and its return margin over the human-driven host lies inside the test's own noise (its 95% "
-              "bootstrap interval over the two hosts' test episodes covers zero), so a longer test of the same "
-              "networks could decide them either way; per seed in seed_margins_vs_human.csv.")
+# What the close counts in a cell of the seed-by-seed comparison mean.
+CLOSE_NOTE = (f"Close: a seed on which the host is safe (under {SAFE_COLLISIONS:g} collisions per episode) and its "
+              "return margin over the human-driven host lies inside the test's own noise (the 95% bootstrap "
+              "interval over the two hosts' test episodes covers zero), so a longer test of the same networks could "
+              "decide it either way. 'k of n (c of them close)': c of the k winning seeds are close wins; 'l close "
+              "loss(es)': seeds that lose by a margin inside that noise, not counted in k. Per seed in "
+              "seed_margins_vs_human.csv.")
 
 
 def seed_margins(evals: pd.DataFrame, episodes: pd.DataFrame | None = None, reference: str = "human",
@@ -146,26 +173,33 @@ def seeds_beating(evals: pd.DataFrame, reference: str = "human", scenarios: list
     """Long table, one row per (model, scenario) other than `reference`'s: `seeds`, those on which both the
     model and `reference` were tested, and `beating`, those on which the model's test return exceeds the
     reference's with under `max_collisions` collisions per episode. Empty without the reference. With
-    `episodes`, also `close`: the seeds whose return margin lies inside the test's noise (`seed_margins`)."""
+    `episodes`, also the seeds whose return margin lies inside the test's noise (`seed_margins`), split by
+    side: `close_won` (counted in `beating`) and `close_lost` (not)."""
     margins = seed_margins(evals, episodes, reference, max_collisions)
-    columns = ["model", "scenario", "seeds", "beating"] + (["close"] if episodes is not None else [])
+    columns = ["model", "scenario", "seeds", "beating"] + (["close_won", "close_lost"] if episodes is not None else [])
     if margins.empty:
         return pd.DataFrame(columns=columns)
+    margins = margins.assign(close_won=margins["close"] & margins["beating"],
+                             close_lost=margins["close"] & ~margins["beating"])
     out = margins.groupby(["model", "scenario"], sort=False).agg(
-        seeds=("seed", "nunique"), beating=("beating", "sum"), close=("close", "sum")).reset_index()
+        seeds=("seed", "nunique"), beating=("beating", "sum"), close_won=("close_won", "sum"),
+        close_lost=("close_lost", "sum")).reset_index()
     if scenarios is not None:
         out = out[out["scenario"].isin(scenarios)]
     return out[columns].astype({c: int for c in columns[2:]}).reset_index(drop=True)
 
 
 def beating_grid(beating: pd.DataFrame, scenarios: list[str]) -> pd.DataFrame:
-    """Method x scenario cells 'k of n' from `seeds_beating`, with '(c close)' where c of those seeds' return
-    margins lie inside the test's noise; '-' where a cell has no paired seed."""
+    """Method x scenario cells 'k of n' from `seeds_beating`; '(c of them close)' where c of the k winning
+    seeds win inside the test's noise, '(l close loss(es))' where l losing seeds lose inside it; '-' where a
+    cell has no paired seed."""
     grid = pd.DataFrame("-", index=pd.Index(ordered_models(beating["model"]), name="model"), columns=scenarios)
     for row in beating.itertuples(index=False):
         if row.scenario in scenarios:
-            close = getattr(row, "close", 0)
-            grid.loc[row.model, row.scenario] = f"{row.beating} of {row.seeds}" + (f" ({close} close)" if close else "")
+            won, lost = getattr(row, "close_won", 0), getattr(row, "close_lost", 0)
+            close = [f"{won} of them close"] * bool(won) + [f"{lost} close loss{'es' * (lost != 1)}"] * bool(lost)
+            grid.loc[row.model, row.scenario] = f"{row.beating} of {row.seeds}" + (f" ({'; '.join(close)})"
+                                                                                    if close else "")
     return grid
 
 

@@ -166,29 +166,32 @@ def test_seeds_beating_the_human_driven_host_pairs_each_seed_with_its_own_traffi
     assert seeds_beating(evals[evals["model"] != "human"]).empty  # no reference host: no comparison
 
 
-def test_a_seed_whose_margin_lies_inside_the_test_noise_is_close() -> None:
+def test_a_seed_whose_margin_lies_inside_the_test_noise_is_close_and_a_close_loss_is_no_win() -> None:
     from analysis.tables import beating_grid, seed_margins, seeds_beating
 
     rng = np.random.default_rng(0)
     spread = rng.normal(0.0, 100.0, 48)  # episode returns spread as widely as the published tests' (sd 100-140)
-    human = {0: 200 + spread, 1: 200 + spread, 2: 200 + spread}
+    human = {0: 200 + spread, 1: 200 + spread, 2: 200 + spread, 3: 200 + spread}
     # seed 0: 5 more per episode with 48 wide-spread episodes -> beats, but the test cannot tell (close);
-    # seed 1: 150 more on tightly spread episodes -> beats, decided; seed 2: 5 more but unsafe -> not close.
-    mine = {0: 205 + rng.permutation(spread), 1: 350 + rng.normal(0, 5, 48), 2: 205 + rng.permutation(spread)}
-    collisions = {0: 0.0, 1: 0.0, 2: 0.5}
+    # seed 1: 150 more on tightly spread episodes -> beats, decided; seed 2: 5 more but unsafe -> not close;
+    # seed 3: 5 less, safe -> loses inside the noise: close, and not a win.
+    mine = {0: 205 + rng.permutation(spread), 1: 350 + rng.normal(0, 5, 48), 2: 205 + rng.permutation(spread),
+            3: 195 + rng.permutation(spread)}
+    collisions = {0: 0.0, 1: 0.0, 2: 0.5, 3: 0.0}
     episodes = pd.DataFrame(
         [("human", "3", s, r, 0.0) for s, rs in human.items() for r in rs]
         + [("proposed", "3", s, r, collisions[s]) for s, rs in mine.items() for r in rs],
         columns=["model", "scenario", "seed", "episode_return", "collisions"])
     evals = episodes.groupby(["model", "scenario", "seed"], as_index=False)[["episode_return", "collisions"]].mean()
     margins = seed_margins(evals, episodes).set_index("seed")
-    assert margins["beating"].tolist() == [True, True, False]
-    assert margins["close"].tolist() == [True, False, False]
+    assert margins["beating"].tolist() == [True, True, False, False]
+    assert margins["close"].tolist() == [True, False, False, True]
     assert margins.loc[0, "margin_low"] < 0 < margins.loc[0, "margin_high"]
     assert margins.loc[1, "margin_low"] > 100
     table = seeds_beating(evals, episodes=episodes)
-    assert table.to_dict("records") == [{"model": "proposed", "scenario": "3", "seeds": 3, "beating": 2, "close": 1}]
-    assert beating_grid(table, ["3"]).loc["proposed"].tolist() == ["2 of 3 (1 close)"]
+    assert table.to_dict("records") == [{"model": "proposed", "scenario": "3", "seeds": 4, "beating": 2,
+                                         "close_won": 1, "close_lost": 1}]
+    assert beating_grid(table, ["3"]).loc["proposed"].tolist() == ["2 of 4 (1 of them close; 1 close loss)"]
     # Without test episodes there is no interval and nothing is called close.
     assert not seed_margins(evals)["close"].any()
 

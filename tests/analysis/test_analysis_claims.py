@@ -10,6 +10,7 @@ from analysis.claims import (
     INCONCLUSIVE,
     NOT_SUPPORTED,
     SUPPORTED,
+    TIE,
     combine,
     evaluate_claims,
     judge,
@@ -54,7 +55,7 @@ def test_every_claim_inconclusive_with_too_few_seeds() -> None:
     assert _verdicts(SyntheticSpec(seeds=(0, 1))) == {k: INCONCLUSIVE for k in range(1, 8)}
 
 
-def test_every_claim_inconclusive_when_methods_do_not_differ() -> None:
+def test_every_claim_a_tie_when_methods_do_not_differ() -> None:
     same = {"proposed": 70.0, "min": 70.0, "coordinate": 70.0, "human": 70.0}
     spec = SyntheticSpec(
         seeds=FIVE, noise=0.0, curve_noise=0.0,
@@ -62,7 +63,7 @@ def test_every_claim_inconclusive_when_methods_do_not_differ() -> None:
         speed=same, lane_changes={k: 3.0 for k in same}, overtakes={k: 6.0 for k in same},
         tau={"proposed": 0.2, "min": 0.2, "coordinate": 0.2},
     )
-    assert _verdicts(spec) == {k: INCONCLUSIVE for k in range(1, 8)}
+    assert _verdicts(spec) == {k: TIE for k in range(1, 8)}
 
 
 def test_missing_method_makes_its_claims_inconclusive() -> None:
@@ -96,9 +97,9 @@ def test_fluctuation_of_a_run_does_not_depend_on_other_models_runs() -> None:
 
 
 def test_judge_rule() -> None:
-    assert judge(Estimate(1.0, 0.5, 1.5, 5)) == (SUPPORTED, "CI above 0")
+    assert judge(Estimate(1.0, 0.5, 1.5, 5)) == (SUPPORTED, "interval above 0")
     assert judge(Estimate(-1.0, -1.5, -0.5, 5))[0] == NOT_SUPPORTED
-    assert judge(Estimate(0.2, -0.5, 0.9, 5)) == (INCONCLUSIVE, "CI covers 0")
+    assert judge(Estimate(0.2, -0.5, 0.9, 5)) == (TIE, "interval covers 0")
     assert judge(Estimate(1.0, np.nan, np.nan, 1)) == (INCONCLUSIVE, "1 seed: no confidence interval")
     assert judge(Estimate(1.0, 0.5, 1.5, 2))[0] == INCONCLUSIVE  # below MIN_SEEDS
     assert judge(Estimate(np.nan, np.nan, np.nan, 0)) == (INCONCLUSIVE, "missing data")
@@ -107,7 +108,9 @@ def test_judge_rule() -> None:
 def test_combine_rule() -> None:
     assert combine([SUPPORTED, SUPPORTED]) == SUPPORTED
     assert combine([SUPPORTED, INCONCLUSIVE]) == INCONCLUSIVE
-    assert combine([SUPPORTED, INCONCLUSIVE, NOT_SUPPORTED]) == NOT_SUPPORTED
+    assert combine([SUPPORTED, TIE]) == TIE
+    assert combine([TIE, INCONCLUSIVE]) == INCONCLUSIVE
+    assert combine([SUPPORTED, TIE, NOT_SUPPORTED]) == NOT_SUPPORTED
     assert combine([]) == INCONCLUSIVE
 
 
@@ -115,14 +118,14 @@ def test_probability_of_improvement_known_values() -> None:
     better = {"1": [5.0, 6.0, 7.0], "2": [5.0, 6.0]}
     worse = {"1": [1.0, 2.0], "2": [1.0, 2.0, 3.0]}
     est = probability_of_improvement(better, worse)
-    assert est.point == 1.0 and est.low == 1.0 and est.high == 1.0
+    assert est.point == 1.0 and not est.has_ci  # a point: no interval for it covers at five seeds
     assert probability_of_improvement(worse, better).point == 0.0
     assert probability_of_improvement(better, better).point == pytest.approx(0.5)
     # Half the pairs win: x = {0, 2} vs y = {1}.
     assert probability_of_improvement({"a": [0.0, 2.0]}, {"a": [1.0]}).point == pytest.approx(0.5)
 
 
-def test_bootstrap_intervals() -> None:
+def test_intervals_over_seeds() -> None:
     one = mean_ci([3.0])
     assert one.point == 3.0 and not one.has_ci and one.n == 1
     est = mean_ci([1.0, 2.0, 3.0, 4.0, 5.0])
