@@ -11,7 +11,7 @@ from tensordict import TensorDict, TensorDictBase
 from torchrl.data import Bounded, Categorical, Composite, OneHot, Unbounded
 from torchrl.envs import EnvBase
 
-from ..contracts.names import EPISODE_METRICS
+from ..contracts.events import RECORDED_PER_EPISODE
 from ..observations import ObservationBuilder, ObservationConfig
 from ..simulator import N_ACTIONS, HighwaySimulator, ScenarioConfig, SimulatorConfig
 
@@ -42,7 +42,8 @@ class HeterogeneousHighwayEnv(EnvBase):
                 obs[key] = Bounded(low=0, high=255, shape=(n, *shape), dtype=torch.uint8, device=d)
             else:
                 obs[key] = Unbounded(shape=(n, *shape), dtype=dtype, device=d)
-        obs["episode"] = Composite({k: Unbounded(shape=(n,), device=d) for k in EPISODE_METRICS}, shape=(n,), device=d)
+        obs["episode"] = Composite({k: Unbounded(shape=(n,), device=d) for k in RECORDED_PER_EPISODE}, shape=(n,),
+                                   device=d)
         obs["reward_terms"] = Composite({k: Unbounded(shape=(n,), device=d) for k in REWARD_TERM_KEYS},
                                         shape=(n,), device=d)
         self.observation_spec = Composite(obs, shape=(n,), device=d)
@@ -64,7 +65,7 @@ class HeterogeneousHighwayEnv(EnvBase):
         self.simulator.reset(mask)
         obs = self.observations.reset(mask)
         false = torch.zeros(n, 1, dtype=torch.bool, device=self.device)
-        return TensorDict({**obs, "episode": self._zeros(EPISODE_METRICS),
+        return TensorDict({**obs, "episode": self._zeros(RECORDED_PER_EPISODE),
                            "reward_terms": self._zeros(REWARD_TERM_KEYS),
                            "done": false, "terminated": false.clone(), "truncated": false.clone()},
                           batch_size=[n], device=self.device)
@@ -76,7 +77,7 @@ class HeterogeneousHighwayEnv(EnvBase):
             action = action.to(torch.long).argmax(-1)
         result = self.simulator.step(action.reshape(n))
         obs = self.observations.step()
-        episode = TensorDict({k: result.episode[k].float() for k in EPISODE_METRICS}, batch_size=[n],
+        episode = TensorDict({k: result.episode[k].float() for k in RECORDED_PER_EPISODE}, batch_size=[n],
                              device=self.device)
         terms = TensorDict({k: v.float() for k, v in result.terms.as_dict().items()}, batch_size=[n],
                            device=self.device)

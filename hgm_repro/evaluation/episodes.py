@@ -20,6 +20,7 @@ from tensordict import TensorDict, TensorDictBase
 from torch.nn import functional as F
 from torchrl.envs.utils import ExplorationType, set_exploration_type, step_mdp
 
+from ..contracts.events import RECORDED_PER_EPISODE, event_means
 from ..contracts.interrupts import raise_if_pending
 from ..contracts.names import EPISODE_METRICS, EVAL_SEED_OFFSET
 from ..contracts.schema import JobConfig
@@ -31,7 +32,8 @@ from .policies import attached_driver, trained_network
 @dataclass
 class EvaluationResult:
     """`episodes`: one row per complete episode (`env`, `episode` within the env, then the
-    EPISODE_METRICS columns); `means`: `eval/<metric>` over those rows; `decisions`: the decisions
+    EPISODE_METRICS and `contracts.events` columns); `means`: `eval/<metric>` over those rows (and the
+    events' `eval/crashes_<kind>`, `eval/lane_change_requests`, `eval/refused_*_share`); `decisions`: the decisions
     the counted episodes drove."""
 
     episodes: pd.DataFrame
@@ -74,7 +76,7 @@ def _driver_policy(job: JobConfig, env) -> Policy:
 @torch.no_grad()
 def run_episodes(env, policy: Policy, episodes: int, traffic: int) -> pd.DataFrame:
     """Drive `policy` greedily until every env of `env` has finished `episodes` complete episodes;
-    one row per counted episode (`env`, `episode`, then EPISODE_METRICS).
+    one row per counted episode (`env`, `episode`, then EPISODE_METRICS and the `contracts.events` records).
 
     Every host meets the same traffic for the same `traffic` seed: episode k of env e starts from
     the same initial traffic (its own seed per k, whenever the episode starts), and the NPCs'
@@ -103,7 +105,7 @@ def run_episodes(env, policy: Policy, episodes: int, traffic: int) -> pd.DataFra
                 metrics = td["episode"][counted]
                 rows.append(pd.DataFrame({"env": torch.nonzero(counted).squeeze(1).cpu().numpy(),
                                           "episode": finished[counted].cpu().numpy(),
-                                          **{k: metrics[k].float().cpu().numpy() for k in EPISODE_METRICS}}))
+                                          **{k: metrics[k].float().cpu().numpy() for k in RECORDED_PER_EPISODE}}))
             finished = finished + done.long()
             # Episode k of an env always starts from seed k's traffic, whenever it starts.
             for k in finished[done].unique().tolist():
@@ -140,5 +142,5 @@ def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) 
     quota = episodes_per_env(job.eval.test_steps, n_envs, env.simulator.config.episode_decisions)
     episodes = run_episodes(env, policy, quota, traffic)
     env.close()
-    return EvaluationResult(episodes=episodes, means=episode_means(episodes, "eval"),
-                            decisions=int(episodes["decisions"].sum()))
+    means = {**episode_means(episodes, "eval"), **event_means(episodes, "eval")}
+    return EvaluationResult(episodes=episodes, means=means, decisions=int(episodes["decisions"].sum()))

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import torch
 
+from ..contracts import events
 from ..contracts.simulator_config import HOST_TYPE, ScenarioConfig, SimulatorConfig
 from .neighbours import Neighbours, gather_vehicles, lane_occupancy, nearest_per_lane
 from .reward import RewardTerms, speed_reward
@@ -54,6 +55,16 @@ def episode_metrics(state: TrafficState) -> dict[str, torch.Tensor]:
         "distance_m": state.ep_distance,
         "episode_return": state.ep_return,
         "decisions": decisions,
+        # The `contracts.events` records. The age counts from the episode's start when the host began no
+        # lane change (ep_last_lane_change = -1).
+        events.LANE_CHANGE_AGE: decisions - 1 - state.ep_last_lane_change,
+        events.LANE_CHANGE_REQUESTS: state.ep_lane_change_requests,
+        events.REFUSED_BY_GAP: state.ep_refused_gap,
+        events.REFUSED_BY_PARITY: state.ep_refused_parity,
+        events.CRASH_INTO_LEADER: state.ep_crash_into_leader,
+        events.CRASH_FROM_BEHIND: state.ep_crash_from_behind,
+        events.CRASH_PARTNER_CHANGING: state.ep_crash_partner_changing,
+        events.CRASH_HOST_CHANGING: state.ep_crash_host_changing,
     }
     return metrics
 
@@ -197,7 +208,10 @@ class HighwaySimulator:
             decision=torch.zeros(n, dtype=torch.long, device=d),
             ep_speed_sum=zeros_f.clone(), ep_lane_changes=zeros_f.clone(), ep_overtakes=zeros_f.clone(),
             ep_collisions=zeros_f.clone(), ep_dangerous=zeros_f.clone(), ep_distance=zeros_f.clone(),
-            ep_return=zeros_f.clone(),
+            ep_return=zeros_f.clone(), ep_last_lane_change=torch.full((n,), -1.0, device=d),
+            ep_lane_change_requests=zeros_f.clone(), ep_refused_gap=zeros_f.clone(), ep_refused_parity=zeros_f.clone(),
+            ep_crash_into_leader=zeros_f.clone(), ep_crash_from_behind=zeros_f.clone(),
+            ep_crash_partner_changing=zeros_f.clone(), ep_crash_host_changing=zeros_f.clone(),
             npc_collisions=zeros_f.clone(), npc_distance=zeros_f.clone(),
         )
         fresh.color[:, HOST] = torch.tensor([230, 30, 30], dtype=torch.uint8, device=d)  # the paper's red host
@@ -283,6 +297,10 @@ class HighwaySimulator:
         direction_ok = torch.where(even, wants_left, wants_right)
         start = wants & ~changing & ~off_road & (~guarded | (gap_ok & direction_ok))
         target_lane = torch.where(start, desired_c, s.target_lane)
+        # What the layer refused the host (contracts.events): by the gaps, or by the parity alone.
+        host_request = wants[:, HOST] & ~changing[:, HOST] & ~off_road[:, HOST] & guarded[:, HOST]
+        refused_gap = host_request & ~gap_ok[:, HOST]
+        refused_parity = host_request & gap_ok[:, HOST] & ~direction_ok[:, HOST]
 
         # --- longitudinal command (eq. 2).
         # Guarded drivers hold a cruise speed that their random actions move by a_lon per second;
@@ -318,6 +336,10 @@ class HighwaySimulator:
             return torch.where(has_lead, gather_vehicles(pos, lead, INF) - pos.unsqueeze(-1) - len_sum, INF)
 
         gap = gap_to_lead(pos_lon)
+        # The host's crash as it was at its first overlap (contracts.events): into a leader, from behind,
+        # the partner and the host changing lanes (mid-way, or beginning in this decision).
+        lane_moving = changing | start
+        crash_facts = torch.zeros(n, 4, device=d)
         for _ in range(c.substeps):
             # Longitudinal: eq. 2 for everyone, then the Krauss safe speed for guarded drivers.
             v_cmd = speed + accel_cmd * dt
@@ -341,7 +363,10 @@ class HighwaySimulator:
             # On CPU skipping the bookkeeping when nothing overlaps pays; on a GPU the check itself
             # would stall the stream, so the bookkeeping always runs there.
             if self.device.type != "cpu" or bool(overlap.any()):
+                host_was_hit = hit[:, HOST]
                 hit, npc_crashes = self._record_crashes(overlap, lead, hit, npc_crashes)
+                first = (hit[:, HOST] & ~host_was_hit).unsqueeze(1)
+                crash_facts = torch.where(first, self._host_crash_facts(overlap, lead, lane_moving), crash_facts)
         final_gap = gap[:, HOST]
 
         # --- host events
@@ -381,6 +406,15 @@ class HighwaySimulator:
             ep_dangerous=s.ep_dangerous + dangerous.float(),
             ep_distance=s.ep_distance + travelled[:, HOST],
             ep_return=s.ep_return + reward,
+            ep_last_lane_change=torch.where(host_start, s.decision.float(), s.ep_last_lane_change),
+            ep_lane_change_requests=s.ep_lane_change_requests + (wants[:, HOST] & ~changing[:, HOST]
+                                                                 & ~off_road[:, HOST]).float(),
+            ep_refused_gap=s.ep_refused_gap + refused_gap.float(),
+            ep_refused_parity=s.ep_refused_parity + refused_parity.float(),
+            ep_crash_into_leader=s.ep_crash_into_leader + crash_facts[:, 0],
+            ep_crash_from_behind=s.ep_crash_from_behind + crash_facts[:, 1],
+            ep_crash_partner_changing=s.ep_crash_partner_changing + crash_facts[:, 2],
+            ep_crash_host_changing=s.ep_crash_host_changing + crash_facts[:, 3],
         )
         npc_collisions = s.npc_collisions + npc_crashes
         npc_distance = s.npc_distance + (travelled[:, 1:] * s.active[:, 1:]).sum(1)
@@ -424,6 +458,18 @@ class HighwaySimulator:
         in_npc_crash = self._involved(overlap & ~host_pair, lead)
         npc_crashes = npc_crashes + (in_npc_crash & ~hit).sum(1).float() / 2
         return hit | in_host_crash | in_npc_crash, npc_crashes
+
+    @staticmethod
+    def _host_crash_facts(overlap: torch.Tensor, lead: torch.Tensor, lane_moving: torch.Tensor) -> torch.Tensor:
+        """[N, 4] floats (0/1) of the host's overlaps now: it overlaps a leader; a follower overlaps it;
+        the vehicle it overlaps is changing lanes (its leader first); the host is changing lanes."""
+        ahead = overlap[:, HOST, :]  # [N, 2]: the host's leader in either lane its body covers
+        behind = (overlap & (lead == HOST)).any(-1)  # [N, M]: vehicles whose leader is the host
+        behind[:, HOST] = False
+        partner = torch.where(ahead[:, 0], lead[:, HOST, 0],
+                              torch.where(ahead[:, 1], lead[:, HOST, 1], behind.float().argmax(1)))
+        partner_moving = lane_moving.gather(1, partner.clamp(min=0).unsqueeze(1)).squeeze(1)
+        return torch.stack([ahead.any(-1), behind.any(1), partner_moving, lane_moving[:, HOST]], 1).float()
 
     @staticmethod
     def _involved(pairs: torch.Tensor, lead: torch.Tensor) -> torch.Tensor:

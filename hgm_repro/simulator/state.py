@@ -50,6 +50,17 @@ class TrafficState:
     ep_dangerous: torch.Tensor
     ep_distance: torch.Tensor
     ep_return: torch.Tensor
+    # What the evaluation records per episode beyond the paper's metrics (`contracts.events`): where
+    # the host's last lane change began, its lane-change requests and which of them the safety layer
+    # refused, and what the episode's crash looked like (0/1 flags, set in the crash's decision).
+    ep_last_lane_change: torch.Tensor  # decision index at which the host last began a lane change; -1 none
+    ep_lane_change_requests: torch.Tensor
+    ep_refused_gap: torch.Tensor
+    ep_refused_parity: torch.Tensor
+    ep_crash_into_leader: torch.Tensor
+    ep_crash_from_behind: torch.Tensor
+    ep_crash_partner_changing: torch.Tensor
+    ep_crash_host_changing: torch.Tensor
     # Simulator health, accumulated since construction (never reset with an episode).
     npc_collisions: torch.Tensor
     npc_distance: torch.Tensor

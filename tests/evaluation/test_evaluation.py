@@ -8,6 +8,7 @@ from tensordict import TensorDict
 
 from hgm_repro.contracts.checkpoint import CheckpointMismatchError
 from hgm_repro.contracts.config_files import scenario_config
+from hgm_repro.contracts.events import CRASH_KINDS, EPISODE_EVENTS
 from hgm_repro.evaluation import EPISODE_METRICS, evaluate
 from hgm_repro.evaluation.episodes import episodes_per_env
 from hgm_repro.learner import train
@@ -22,7 +23,7 @@ def checkpoint(tmp_path_factory):
 
 
 def check_result(result, n_envs: int, per_env: int) -> None:
-    assert list(result.episodes.columns) == ["env", "episode", *EPISODE_METRICS]
+    assert list(result.episodes.columns) == ["env", "episode", *EPISODE_METRICS, *EPISODE_EVENTS]
     # The fair test: every env drives the same number of complete episodes, and only those count.
     assert len(result.episodes) == n_envs * per_env
     assert (result.episodes.groupby("env")["episode"].apply(list) == [list(range(per_env))] * n_envs).all()
@@ -31,6 +32,9 @@ def check_result(result, n_envs: int, per_env: int) -> None:
         assert result.means[f"eval/{key}"] == pytest.approx(result.episodes[key].mean())
     assert result.decisions == result.episodes["decisions"].sum()
     assert (result.episodes["avg_speed_kmh"] > 0).all()
+    # Every crash has exactly one kind: the kinds' rates add up to the collision rate.
+    crash_rates = sum(result.means[f"eval/crashes_{k}"] for k in CRASH_KINDS)
+    assert crash_rates == pytest.approx(result.means["eval/collisions"])
 
 
 def test_budget_rounds_up_to_whole_episodes_per_env():
