@@ -28,6 +28,9 @@ EMA_CHECKPOINT = "ema.pt"  # the exponential moving average of the online weight
 VAL_CHECKPOINTS = "val"
 RESELECTED_CHECKPOINT = "reselected.pt"
 RESELECTION_RECORD = "reselection.json"
+# The kept pass with the best return among those safe enough (eval.checkpoint=safest), with its record.
+SAFEST_CHECKPOINT = "safest.pt"
+SAFEST_RECORD = "safest.json"
 LAST_CHECKPOINT = "last.pt"  # everything a resume needs, while training runs
 
 # What evaluation reads of a checkpoint: the network and the identity `check_compatible` checks.

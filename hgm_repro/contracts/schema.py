@@ -11,6 +11,7 @@ one `ConfigError` listing every problem. Keys that a part adds and this schema d
 
 from __future__ import annotations
 
+import dataclasses
 import re
 import types
 import typing
@@ -46,6 +47,10 @@ def ge(x: float) -> dict[str, Check]:
 def unit() -> dict[str, Check]:
     return {"check": Check(lambda v: 0.0 <= v <= 1.0, "must lie in [0, 1]")}
 
+
+# eval.checkpoint=safest judges collisions per episode on at least this many validation episodes: on
+# fewer, a pass with one crash in 20 cannot be told from a safe one.
+SAFEST_MIN_EPISODES = 256
 
 DEVICE_PATTERN = re.compile(r"^(cpu|cuda(:\d+)?|mps)$")
 
@@ -122,6 +127,9 @@ class ModelSchema:
     streams: dict[str, Any]  # checked by ObservationConfig, which owns the observation rules
     network: dict[str, Any] | None = None  # learned models: instantiated with `_target_`
     driver: dict[str, Any] | None = None  # non-learning hosts: instantiated with `_target_`
+    # A learned host under the human-driven host's safety layer (conf/model/*_guarded.yaml). Absent from
+    # the paper's models' configs, so that their training identities stay what they were.
+    safety_layer: bool = False
 
 
 @dataclass(frozen=True)
@@ -142,7 +150,7 @@ class EvalSchema:
     """The test (decisions, envs, which checkpoint drives) and the validation passes during training
     that choose best.pt (conf/eval/default.yaml)."""
 
-    checkpoint: Literal["final", "best", "ema", "reselected"]
+    checkpoint: Literal["final", "best", "ema", "reselected", "safest"]
     test_steps: int = field(metadata=ge(1))
     test_envs: int = field(metadata=ge(1))
     val_every: int = field(metadata=ge(0))
@@ -152,6 +160,10 @@ class EvalSchema:
     reselect_top: int = field(metadata=ge(1))
     reselect_envs: int = field(metadata=ge(1))
     reselect_episodes: int = field(metadata=ge(1))
+    safest_max_collisions: float = field(metadata=ge(0))
+    safest_episodes: int = field(metadata=ge(SAFEST_MIN_EPISODES))
+    safest_envs: int = field(metadata=ge(1))
+    host_safety_layer: bool
 
 
 @dataclass(frozen=True)
@@ -184,6 +196,17 @@ class JobConfig:
     scenario: ScenarioConfig
     train_scenario: ScenarioConfig
     resolved: dict[str, Any] = field(default_factory=dict, repr=False, compare=False)
+
+
+# What a test of a learned host under the layer only at test (eval.host_safety_layer) is called in its
+# results: never the name of the model it trained as, whose results mean the paper's setting.
+LAYER_AT_TEST_SUFFIX = "_layer_at_test"
+
+
+def results_model_name(job: JobConfig) -> str:
+    """The model a test's run and results are named by: `job.model.name`, or `<name>_layer_at_test`
+    when a learned host trained without the safety layer is tested under it."""
+    return job.model.name + (LAYER_AT_TEST_SUFFIX if job.eval.host_safety_layer else "")
 
 
 def _type_name(tp: Any) -> str:
@@ -253,6 +276,9 @@ def check_node(schema: type, node: Any, where: str, errors: list[str]) -> Any:
 def _check_model(model: Any, errors: list[str]) -> None:
     if not isinstance(model, ModelSchema):
         return
+    if model.safety_layer and not model.learned:
+        errors.append(f"model.safety_layer=true is not allowed for the non-learning model {model.name!r}: its driver "
+                      "decides (model.driver.safety_layer)")
     part = "network" if model.learned else "driver"
     node = model.network if model.learned else model.driver
     if not node or "_target_" not in node:
@@ -286,6 +312,19 @@ def _check_eval(evaluation: Any, model: Any, learner: Any, errors: list[str]) ->
                           "reselection re-checks the networks of the best validation passes, which training keeps "
                           "only with both on (set eval.val_every=N eval.keep_val_checkpoints=true, or "
                           "eval.checkpoint=best)")
+    if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "safest" and learned:
+        if not evaluation.val_every or not evaluation.keep_val_checkpoints:
+            errors.append(f"eval.checkpoint=safest is not allowed with eval.val_every={evaluation.val_every} "
+                          f"and eval.keep_val_checkpoints={str(evaluation.keep_val_checkpoints).lower()}: it "
+                          "chooses among the networks of the validation passes, which training keeps only with both "
+                          "on (set eval.val_every=N eval.keep_val_checkpoints=true, or eval.checkpoint=best)")
+    if isinstance(evaluation, EvalSchema) and evaluation.host_safety_layer and isinstance(model, ModelSchema):
+        if not model.learned:
+            errors.append(f"eval.host_safety_layer=true is not allowed for the non-learning model {model.name!r}: "
+                          "its driver decides its layer (model.driver.safety_layer)")
+        elif model.safety_layer:
+            errors.append(f"eval.host_safety_layer=true is not allowed with model={model.name}: it drives under "
+                          "the layer already, in training and test")
     if isinstance(evaluation, EvalSchema) and evaluation.checkpoint == "ema" and learned:
         if isinstance(learner, LearnerSchema) and not learner.ema_decay:
             errors.append("eval.checkpoint=ema is not allowed with learner.ema_decay=0: training keeps no moving "
@@ -365,6 +404,14 @@ def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
         sim = simulator_config(root.get("simulator"))
     except ConfigError as e:
         errors.append(str(e))
+    model = parts["model"]
+    if sim is not None and isinstance(model, ModelSchema) and model.learned:
+        # A learned host's layer is its model's (so that its name says so); a driver's is the driver's.
+        if sim.host_safety_layer:
+            errors.append(f"simulator.host_safety_layer=true is not allowed with the learned model {model.name!r}: "
+                          f"a learned host under the layer is its own model, named as such (model={model.name}"
+                          "_guarded, conf/model/*_guarded.yaml)")
+        sim = dataclasses.replace(sim, host_safety_layer=model.safety_layer)
     if sim is not None:
         for name in ("scenario", "train_scenario"):
             try:

@@ -138,6 +138,10 @@ def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) 
     n_envs = job.eval.test_envs
     traffic = job.seed + EVAL_SEED_OFFSET
     env = make_env(job, scenario, n_envs=n_envs, seed=traffic)
+    if job.eval.host_safety_layer:
+        # The probe: a learned host that trained without the layer, tested under it (validation refuses
+        # the option for hosts that have a layer of their own).
+        env.simulator.host_safety_layer = True
     policy = learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
     quota = episodes_per_env(job.eval.test_steps, n_envs, env.simulator.config.episode_decisions)
     episodes = run_episodes(env, policy, quota, traffic)

@@ -104,7 +104,7 @@ def reselect(job: JobConfig, checkpoint_dir: Path) -> tuple[Path, dict[str, Any]
         record["passes"] = kept
         winner = next(p for p in passes if p.env_steps == record["chosen_env_steps"])
         save_checkpoint({**load_checkpoint(winner.path), "reselected_from": winner.env_steps}, chosen_path)
-        _write_json(record, record_path)
+        write_json(record, record_path)
         return chosen_path, record
     finally:
         lock.release()
@@ -136,7 +136,8 @@ def _choose(job: JobConfig, passes: list[ValidationPass], options: dict[str, Any
             "chosen_env_steps": best["env_steps"]}
 
 
-def _write_json(payload: dict[str, Any], path: Path) -> None:
+def write_json(payload: dict[str, Any], path: Path) -> None:
+    """A choice's record, replaced whole (a reader never sees half of it)."""
     tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
     tmp.write_text(json.dumps(payload, indent=2))
     os.replace(tmp, path)

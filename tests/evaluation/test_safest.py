@@ -1,0 +1,85 @@
+"""eval.checkpoint=safest: among the kept validation passes, the best return of those under a collision
+bar, each pass driven on at least 256 validation episodes; refused with a message when none is under it."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+import torch
+
+from hgm_repro.contracts.checkpoint import SAFEST_CHECKPOINT, SAFEST_RECORD, VAL_CHECKPOINTS, load_checkpoint
+from hgm_repro.contracts.errors import ConfigError
+from hgm_repro.contracts.names import VAL_SEED_OFFSET
+from hgm_repro.envs import make_env
+from hgm_repro.evaluation import safest
+from hgm_repro.evaluation.episodes import learned_policy, run_episodes
+from hgm_repro.learner import train
+from tests.helpers.learner import Recorder, compose_job
+
+KEEP = ["eval.val_every=32", "eval.val_envs=2", "eval.keep_val_checkpoints=true", "eval.checkpoint=safest",
+        "eval.safest_envs=64"]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """One tiny training that keeps four validation passes."""
+    directory = tmp_path_factory.mktemp("safest")
+    train(compose_job(*KEEP), directory, Recorder())
+    return directory
+
+
+def test_pick_takes_the_best_return_under_the_bar():
+    rows = [{"env_steps": 32, "return": 90.0, "collisions": 0.0}, {"env_steps": 64, "return": 200.0, "collisions": 0.3},
+            {"env_steps": 96, "return": 120.0, "collisions": 0.04}, {"env_steps": 128, "return": 120.0,
+                                                                      "collisions": 0.01}]
+    assert safest.pick_safest(rows, 0.05)["env_steps"] == 96  # the racer at 64 crashes; ties: the earlier pass
+    assert safest.pick_safest(rows, 0.5)["env_steps"] == 64
+    assert safest.pick_safest(rows, 0.0) is None  # under the bar means strictly under
+
+
+def test_every_pass_is_driven_on_256_validation_episodes_and_the_choice_follows_the_bar(trained, tmp_path):
+    directory = tmp_path / "copy"
+    shutil.copytree(trained, directory)
+    # A bar every pass passes (an episode holds at most one crash): the best return of all.
+    path, record = safest.choose_safest(compose_job(*KEEP, "eval.safest_max_collisions=1.01"), directory)
+    rows = record["candidates"]
+    assert [r["env_steps"] for r in rows] == [32, 64, 96, 128]
+    assert all(r["episodes"] == 256 for r in rows)
+    assert record["options"]["traffic_seed"] == 0 + VAL_SEED_OFFSET
+    best = max(rows, key=lambda r: r["return"])
+    assert record["chosen_env_steps"] == best["env_steps"]
+    assert load_checkpoint(path)["safest_from"] == best["env_steps"]
+    assert path == directory / SAFEST_CHECKPOINT
+    # A row is its pass's own greedy drive on the validation traffic, recomputed here.
+    job = compose_job(*KEEP)
+    env = make_env(job, job.train_scenario, n_envs=64, seed=VAL_SEED_OFFSET)
+    episodes = run_episodes(env, learned_policy(job, directory / VAL_CHECKPOINTS / "000000064.pt",
+                                                torch.device("cpu")), 4, VAL_SEED_OFFSET)
+    assert rows[1]["return"] == pytest.approx(float(episodes["episode_return"].mean()))
+    assert rows[1]["collisions"] == pytest.approx(float(episodes["collisions"].mean()))
+    # A bar just above the safest pass's collisions: that pass, or a safer-enough one with more return.
+    lowest = min(r["collisions"] for r in rows)
+    bar = lowest + 1e-6
+    stamp = (directory / SAFEST_RECORD).stat().st_mtime_ns
+    _, again = safest.choose_safest(compose_job(*KEEP, f"eval.safest_max_collisions={bar}"), directory)
+    under = [r for r in rows if r["collisions"] < bar]
+    assert again["chosen_env_steps"] == max(under, key=lambda r: r["return"])["env_steps"]
+    assert again["candidates"] == rows  # another bar re-picks from the same drives
+    assert (directory / SAFEST_RECORD).stat().st_mtime_ns >= stamp
+
+
+def test_no_pass_under_the_bar_is_refused_with_the_safest_named(trained, tmp_path):
+    directory = tmp_path / "copy"
+    shutil.copytree(trained, directory)
+    with pytest.raises(ConfigError, match=r"no validation pass .* stays under eval.safest_max_collisions=0.0"):
+        safest.choose_safest(compose_job(*KEEP, "eval.safest_max_collisions=0"), directory)
+    assert not (directory / SAFEST_CHECKPOINT).exists()
+    assert json.loads((directory / SAFEST_RECORD).read_text())["chosen_env_steps"] is None
+
+
+def test_no_kept_pass_is_refused(tmp_path):
+    with pytest.raises(ConfigError, match="holds no validation pass's network"):
+        safest.choose_safest(compose_job(*KEEP), tmp_path)
