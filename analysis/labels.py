@@ -13,13 +13,26 @@ LEARNED = ("proposed", "min", "coordinate")
 REFERENCE_HOSTS = ("human", "idm_mobil", "idm_mobil_limits")
 # proposed_enriched (conf/model/proposed_enriched.yaml) is a labelled variant, not the paper's method: it is
 # drawn and tabled beside the three, and no claim reads it.
-MODEL_ORDER = ("proposed", "min", "coordinate", "proposed_enriched", "human", "idm_mobil", "idm_mobil_limits",
-               "idm_limits", "random")
+# The guarded forms (conf/model/*_guarded.yaml) are the three methods trained and tested under the
+# human-driven host's safety layer: not the paper's methods, named so wherever they appear; the claims
+# read them only in their own section ("On equal terms"), in place of the methods they guard.
+GUARDED = {"proposed_guarded": "proposed", "min_guarded": "min", "coordinate_guarded": "coordinate"}
+# A network trained without the layer and tested under it (eval.host_safety_layer): a probe, not a method.
+LAYER_AT_TEST = {"proposed_layer_at_test": "proposed", "min_layer_at_test": "min",
+                 "coordinate_layer_at_test": "coordinate"}
+MODEL_ORDER = ("proposed", "min", "coordinate", "proposed_enriched", *GUARDED, *LAYER_AT_TEST, "human", "idm_mobil",
+               "idm_mobil_limits", "idm_limits", "random")
 MODEL_LABELS = {
     "proposed": "Proposed (HGM + camera)",
     "min": "Min (camera only)",
     "coordinate": "Coordinate (V2X vector)",
     "proposed_enriched": "Variant: proposed with the enriched HGM (not the paper's)",
+    "proposed_guarded": "Guarded: proposed under the safety layer (not the paper's)",
+    "min_guarded": "Guarded: Min under the safety layer (not the paper's)",
+    "coordinate_guarded": "Guarded: Coordinate under the safety layer (not the paper's)",
+    "proposed_layer_at_test": "Proposed, under the layer at test only (trained without it)",
+    "min_layer_at_test": "Min, under the layer at test only (trained without it)",
+    "coordinate_layer_at_test": "Coordinate, under the layer at test only (trained without it)",
     "human": "Human-driven host",
     "idm_mobil": "IDM + MOBIL host",
     "idm_mobil_limits": "IDM + MOBIL inside the host's limits",
@@ -27,9 +40,14 @@ MODEL_LABELS = {
     "random": "Random host",
 }
 SHORT_LABELS = {"proposed": "Proposed", "min": "Min", "coordinate": "Coordinate",
-                "proposed_enriched": "Variant: enriched HGM", "human": "Human", "idm_mobil": "IDM+MOBIL",
+                "proposed_enriched": "Variant: enriched HGM", "proposed_guarded": "Proposed (guarded)",
+                "min_guarded": "Min (guarded)", "coordinate_guarded": "Coordinate (guarded)",
+                "proposed_layer_at_test": "Proposed (layer at test)", "min_layer_at_test": "Min (layer at test)",
+                "coordinate_layer_at_test": "Coordinate (layer at test)", "human": "Human", "idm_mobil": "IDM+MOBIL",
                 "idm_mobil_limits": "IDM+MOBIL (host limits)", "idm_limits": "IDM (host limits)", "random": "Random"}
 PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "proposed_enriched": "#6fb3e0",
+           "proposed_guarded": "#0b3c61", "min_guarded": "#8a1f30", "coordinate_guarded": "#175c22",
+           "proposed_layer_at_test": "#7f9db9", "min_layer_at_test": "#e3a1aa", "coordinate_layer_at_test": "#94c99c",
            "human": "#555555", "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "idm_limits": "#c9a227",
            "random": "#b08d57"}
 

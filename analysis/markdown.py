@@ -12,6 +12,7 @@ from analysis.claims import ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
 from analysis.report import fmt_estimate
 from analysis.scale import is_smoke, scale_text
+from analysis.sections import Section, markdown_lines
 from analysis.tables import CLOSE_NOTE, PAPER_TABLE6, SAFE_COLLISIONS, beating_grid
 
 # The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
@@ -60,7 +61,8 @@ def beating_lines(beating: pd.DataFrame, scenarios: list[str]) -> list[str]:
 
 def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
                      evals: pd.DataFrame, commits: list[str], figures: dict[str, dict[str, Path]],
-                     out_dir: Path, beating: pd.DataFrame | None = None) -> str:
+                     out_dir: Path, beating: pd.DataFrame | None = None,
+                     sections: list[Section] | None = None) -> str:
     """The Markdown text; figure links are relative to `out_dir`, where results.md is written."""
     scenarios = [s for s in SCENARIOS if s in set(summary["scenario"])] \
         or sorted(set(summary["scenario"]))
@@ -83,6 +85,8 @@ def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: 
     for claim in claims:
         evidence = "; ".join(c.text() for c in claim.comparisons).replace("|", "/")
         lines.append(f"| {claim.number} | {claim.statement} | **{claim.verdict}** | {evidence} |")
+    for extra in sections or []:
+        lines += ["", *markdown_lines(extra, out_dir)]
     shown = [(name, label) for name, label in FIGURES if name in figures]
     if shown:
         lines += ["", "## Figures", ""]

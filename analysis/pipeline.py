@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from analysis import tables
+from analysis import crashes, equal_terms, tables
 from analysis.claims import claims_table, evaluate_claims
 from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
@@ -213,6 +213,12 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     claims_csv = out_dir / "claims.csv"
     claims_table(results).to_csv(claims_csv, index=False)
     csvs.append(claims_csv)
+    crash_section, crash_table, crash_figure = crashes.section(data.episodes, out_dir)
+    if crash_figure is not None:
+        figures["crash_anatomy"] = crash_figure
+    if not crash_table.empty:
+        csvs.append(out_dir / "crash_anatomy.csv")
+    sections = [s for s in (equal_terms.section(evals, data.curves, results), crash_section) if s is not None]
 
     inputs = ReportInputs(
         tracking_uri=data.tracking_uri, experiment=data.experiment, git_commits=data.git_commits,
@@ -226,11 +232,11 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         git_dirty=data.git_dirty, scenario_mix=scenario_mix(data.runs),
         train_keys=sorted(str(k) for k in train_runs["train_key"].dropna().unique()),
         scale=scale_text(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
-        config_runs=_config_runs(data.configs),
+        config_runs=_config_runs(data.configs), sections=sections,
     )
     markdown = out_dir / "results.md"
     markdown.write_text(results_markdown(summary, results, data.configs, evals, data.git_commits, figures, out_dir,
-                                         beating))
+                                         beating, sections))
     csvs.append(markdown)
     report = write_report(inputs, out_dir / "report.pdf")
     return Outputs(report=report, figures=figures, csvs=csvs)

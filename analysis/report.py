@@ -16,6 +16,7 @@ from PIL import Image
 from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
 from analysis.labels import METRIC_LABELS, SCENARIOS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
 from analysis.scenarios import PAPER_CV_RATIO
+from analysis.sections import Section, write_pdf_section
 from analysis.tables import CLOSE_NOTE, SAFE_COLLISIONS
 
 # matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
@@ -56,6 +57,7 @@ class ReportInputs:
     smoke: bool = False  # made with the smoke preset: not a result
     source: str = ""  # where the data came from, as the cover names it (no machine path for a bundle)
     config_runs: dict[str, str] = field(default_factory=dict)  # model -> which run its config is from
+    sections: list[Section] = field(default_factory=list)  # after the claims: crash anatomy, on equal terms
 
 
 SMOKE_BANNER = ("SMOKE RUN: NOT A RESULT. The smoke preset trains for a few hundred steps to prove that the "
@@ -426,6 +428,8 @@ def write_report(inp: ReportInputs, path: Path) -> Path:
     _training_section(w, inp, 4, "fig7_overtakes", "overtakes per episode")
     _test_section(w, inp)
     _claims_section(w, inp)
+    for extra in inp.sections:
+        write_pdf_section(w, extra)
     w.section(SECTION_TITLES[7])
     if inp.scale:
         w.para(f"Scale of these runs: {inp.scale} What follows holds at this scale only"
