@@ -33,6 +33,8 @@ from ..contracts.checkpoint import (
     LAST_CHECKPOINT,
     RESELECTED_CHECKPOINT,
     RESELECTION_RECORD,
+    SAFEST_CHECKPOINT,
+    SAFEST_RECORD,
     VAL_CHECKPOINTS,
     CheckpointMismatchError,
     chosen_by_current_validation,
@@ -42,7 +44,7 @@ from ..contracts.checkpoint import (
 from ..contracts.errors import BAD_INPUT_EXIT, ConfigError
 from ..contracts.interrupts import JobInterrupted, acquire_stoppably, hand_on, signals_raise
 from ..contracts.names import VALIDATION_RETURN
-from ..contracts.schema import JobConfig, validate
+from ..contracts.schema import JobConfig, results_model_name, validate
 from ..contracts.simulator_config import ScenarioConfig
 from ..contracts.train_key import EVALUATION_VERSION, evaluation_key, train_key, training_config
 from .provenance import git_info, launch_description, launch_tags
@@ -413,6 +415,14 @@ def checkpoint_to_evaluate(job: JobConfig, training: Training) -> Path | None:
                 f"network in {kept}: it trained with eval.keep_val_checkpoints=false. Test its best.pt "
                 "(eval.checkpoint=best), or train again with eval.keep_val_checkpoints=true force_retrain=true.")
         return training.checkpoint.with_name(RESELECTED_CHECKPOINT)  # chosen when the test runs (reselection.py)
+    if which == "safest":
+        kept = training.checkpoint.parent / VAL_CHECKPOINTS
+        if not any(kept.glob("*.pt")):
+            raise ConfigError(
+                f"eval.checkpoint=safest, but the training (run {training.run_id}) kept no validation pass's "
+                f"network in {kept}: it trained with eval.keep_val_checkpoints=false. Test its best.pt "
+                "(eval.checkpoint=best), or train again with eval.keep_val_checkpoints=true force_retrain=true.")
+        return training.checkpoint.with_name(SAFEST_CHECKPOINT)  # chosen when the test runs (evaluation/safest.py)
     best = training.checkpoint.with_name(BEST_CHECKPOINT)
     if not best.is_file():
         raise ConfigError(
@@ -463,9 +473,11 @@ def evaluate_and_log(
                  "evaluation_key": key}
     if training.run_id:
         eval_tags["train_run_id"] = training.run_id
+    # A learned host tested under the layer it trained without is named so, never as the method.
+    eval_tags["model"] = results_model_name(job)
     if checkpoint is not None:
         eval_tags["checkpoint"] = checkpoint.stem  # final or best
-    name = f"{job.model.name} seed{job.seed} {scenario_label(job.scenario.name)} eval"
+    name = f"{results_model_name(job)} seed{job.seed} {scenario_label(job.scenario.name)} eval"
     description = _evaluation_description(job, tracker, training, checkpoint)
     run_id = tracker.start_run(name, eval_tags, parent_run_id, description=description)
     with _run_status(tracker, run_id):
@@ -477,6 +489,12 @@ def evaluate_and_log(
             checkpoint, record = reselect(job, checkpoint.parent)
             tracker.log_text(run_id, json.dumps(record, indent=2), RESELECTION_RECORD)
             tracker.set_tags(run_id, {"reselected_env_steps": record["chosen_env_steps"]})
+        if job.eval.checkpoint == "safest" and checkpoint is not None:
+            from ..evaluation.safest import choose_safest
+
+            checkpoint, record = choose_safest(job, checkpoint.parent)
+            tracker.log_text(run_id, json.dumps(record, indent=2), SAFEST_RECORD)
+            tracker.set_tags(run_id, {"safest_env_steps": record["chosen_env_steps"]})
         with tracker.system_metrics(run_id, job.tracking.system_metrics):
             result = evaluate_fn(job, job.scenario, checkpoint)
         means = {k: float(v) for k, v in result.means.items()}

@@ -83,3 +83,23 @@ def test_no_pass_under_the_bar_is_refused_with_the_safest_named(trained, tmp_pat
 def test_no_kept_pass_is_refused(tmp_path):
     with pytest.raises(ConfigError, match="holds no validation pass's network"):
         safest.choose_safest(compose_job(*KEEP), tmp_path)
+
+
+def test_a_job_tests_the_safest_pass_and_the_probe_reuses_the_training_under_its_own_name(tmp_path):
+    from hgm_repro.app.job import run_job
+    from hgm_repro.app.store import Tracker, resolve_location
+    from tests.helpers.learner import compose_cfg
+
+    job_keep = [*KEEP, "tracking.log_gif=false", "tracking.log_model=false"]
+    outcome = run_job(compose_cfg(*job_keep, "eval.safest_max_collisions=1.01"), tmp_path)
+    tracker = Tracker(resolve_location(compose_cfg(*job_keep).tracking, tmp_path), "hgm_repro")
+    tags = tracker.get_run(outcome.eval_run_id).data.tags
+    record = json.loads((outcome.training.checkpoint.parent / SAFEST_RECORD).read_text())
+    assert tags["checkpoint"] == "safest" and tags["safest_env_steps"] == str(record["chosen_env_steps"])
+    assert SAFEST_RECORD in [a.path for a in tracker.client.list_artifacts(outcome.eval_run_id)]
+    # The probe: the same training (not trained again), its test named as the layer-at-test host.
+    probe = run_job(compose_cfg(*job_keep, "eval.checkpoint=best", "eval.host_safety_layer=true"), tmp_path)
+    assert probe.training.run_id == outcome.training.run_id
+    run = tracker.get_run(probe.eval_run_id)
+    assert run.data.tags["model"] == "proposed_layer_at_test" and run.info.run_name.startswith("proposed_layer_at_test")
+    assert tracker.get_run(outcome.eval_run_id).data.tags["model"] == "proposed"
