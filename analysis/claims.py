@@ -272,8 +272,8 @@ def verdict_sentence(result: ClaimResult) -> str:
     if result.verdict == SUPPORTED:
         # The difference closest to failing is the one worth quoting.
         closest = min(comps, key=lambda c: abs(c.estimate.low) if c.estimate.has_ci else np.inf)
-        what = "the one" if total == 1 else f"all {total} differences"
-        return f"{what.capitalize()} it needs lie above 0 (closest to 0: {closest.label}, {closest.number()})."
+        what = "its one difference lies" if total == 1 else f"all {total} differences it needs lie"
+        return f"{what.capitalize()} above 0 (closest to 0: {closest.label}, {closest.number()})."
     if result.verdict == NOT_SUPPORTED:
         against = [c for c in comps if c.verdict == NOT_SUPPORTED]
         first = against[0]
@@ -282,7 +282,7 @@ def verdict_sentence(result: ClaimResult) -> str:
         ties = [c for c in comps if c.verdict == TIE]
         held = sum(c.verdict == SUPPORTED for c in comps)
         first = ties[0]
-        rest = f"; the other {held} hold" if held else ""
+        rest = "; the other one holds" if held == 1 else f"; the other {held} hold" if held else ""
         return (f"{len(ties)} {of} cannot be told from 0 with these seeds ({first.label}, {first.number()})"
                 f"{rest}.")
     missing = _first(comps, INCONCLUSIVE)

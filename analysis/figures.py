@@ -25,6 +25,7 @@ from analysis.labels import (  # noqa: E402
     ordered_scenarios,
 )
 from analysis.scenarios import PAPER_CV_RATIO  # noqa: E402
+from analysis.stats import t_interval  # noqa: E402
 
 FORMATS = ("png", "pdf", "svg")
 TRAINING_FIGURES = {  # file stem -> (train metric, matching eval metric for reference lines, paper figure)
@@ -74,31 +75,57 @@ def reference_levels(evals: pd.DataFrame, metric: str) -> dict[str, tuple[float,
     return levels
 
 
+def t_band(values: pd.Series) -> tuple[float, float]:
+    """The 95 % Student-t interval over seeds as a seaborn error bar (the report's one interval method)."""
+    arr = np.asarray(values, dtype=float)
+    arr = arr[np.isfinite(arr)]
+    if arr.size < 2:
+        return (np.nan, np.nan)
+    low, high = t_interval(arr[None, :])
+    return float(low[0]), float(high[0])
+
+
+def _curve_panel(ax: plt.Axes, binned: pd.DataFrame, models: list[str], evals: pd.DataFrame,
+                 eval_metric: str) -> None:
+    seeds = binned.groupby("model")["seed"].nunique()
+    labels = {m: f"{model_label(m)} ({seeds[m]} seed{'s' if seeds[m] != 1 else ''})" for m in models}
+    part = binned[binned["model"].isin(models)].assign(label=lambda f: f["model"].map(labels))
+    palette = {labels[m]: PALETTE.get(m) or f"C{i}" for i, m in enumerate(models)}
+    sns.lineplot(data=part, x="step", y="value", hue="label", hue_order=[labels[m] for m in models],
+                 palette=palette, errorbar=t_band, ax=ax, linewidth=1.8)
+    for host, (level, where) in reference_levels(evals, eval_metric).items():
+        ax.axhline(level, color=PALETTE[host], linestyle="--", linewidth=1.3,
+                   label=f"{model_label(host)} (eval, {where})")
+    ax.set_xlim(0, part["step"].max())
+    ax.set_xlabel("Environment steps", labelpad=1)
+    ax.xaxis.set_major_formatter(matplotlib.ticker.EngFormatter(sep=""))
+
+
 def training_figure(curves: pd.DataFrame, evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
-    """One of Figs. 5-7: mean over seeds per method with a 95 % CI band, hosts as dashed lines."""
+    """One of Figs. 5-7: mean over seeds per method with a 95 % t band, hosts as dashed lines. The paper's
+    three methods fill the left panel over their own steps; a variant (another model or budget) gets a
+    panel of its own, beside Proposed, so that a longer training does not squeeze the paper's x axis."""
     metric, eval_metric, paper_fig = TRAINING_FIGURES[stem.name]
     binned = bin_curves(curves, metric)
     if binned.empty:
         return None
     _style()
-    fig, ax = plt.subplots(figsize=(7.0, 3.9))
     models = ordered_models(binned["model"])
-    seeds = binned.groupby("model")["seed"].nunique()
-    binned = binned.assign(label=[f"{model_label(m)} ({seeds[m]} seed{'s' if seeds[m] != 1 else ''})"
-                                  for m in binned["model"]])
-    hue_order = [f"{model_label(m)} ({seeds[m]} seed{'s' if seeds[m] != 1 else ''})" for m in models]
-    palette = {lab: PALETTE.get(m, None) or f"C{i}" for i, (m, lab) in enumerate(zip(models, hue_order,
-                                                                                    strict=True))}
-    sns.lineplot(data=binned, x="step", y="value", hue="label", hue_order=hue_order, palette=palette,
-                 errorbar=("ci", 95), n_boot=1000, seed=0, ax=ax, linewidth=1.8)
-    for host, (level, where) in reference_levels(evals, eval_metric).items():
-        ax.axhline(level, color=PALETTE[host], linestyle="--", linewidth=1.4,
-                   label=f"{model_label(host)} (eval, {where})")
-    ax.set_xlabel("Environment steps")
-    ax.set_ylabel(METRIC_LABELS.get(metric, metric))
-    ax.set_title(f"{METRIC_LABELS.get(metric, metric)} during training (cf. paper {paper_fig})")
-    ax.xaxis.set_major_formatter(matplotlib.ticker.EngFormatter(sep=""))
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=2, frameon=False, fontsize=8.5)
+    paper = [m for m in models if m in LEARNED]
+    variants = [m for m in models if m not in LEARNED]
+    panels = [p for p in (paper, (["proposed"] if "proposed" in paper else []) + variants if variants else [])
+              if p]
+    fig, axes = plt.subplots(1, len(panels), figsize=(7.0 if len(panels) == 1 else 11.0, 4.8), squeeze=False,
+                             sharey=True, gridspec_kw={"width_ratios": [1.0] * len(panels)})
+    titles = ["The paper's three methods", "Variants beside Proposed (not the paper's)"]
+    for ax, group, title in zip(axes[0], panels, titles if paper else titles[1:], strict=False):
+        _curve_panel(ax, binned, group, evals, eval_metric)
+        ax.set_title(title if len(panels) > 1 else "", fontsize=10)
+        ax.set_ylabel(METRIC_LABELS.get(metric, metric))
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.17), ncol=1 if len(panels) > 1 else 2,
+                  frameon=False, fontsize=8)
+    fig.suptitle(f"{METRIC_LABELS.get(metric, metric)} during training (cf. paper {paper_fig})", fontweight="bold")
+    fig.tight_layout()
     return save(fig, stem)
 
 
@@ -118,8 +145,8 @@ def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
             ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes)
         else:
             sns.pointplot(data=part, x="cv", y=metric, hue="model", hue_order=models,
-                          palette={m: PALETTE.get(m, "black") for m in models}, errorbar=("ci", 95),
-                          n_boot=1000, seed=0, dodge=0.35 if len(models) > 1 else False,  # one method: no dodge
+                          palette={m: PALETTE.get(m, "black") for m in models}, errorbar=t_band,
+                          dodge=0.35 if len(models) > 1 else False,  # one method: no dodge
                           markersize=4, linewidth=1.3, capsize=0.08,
                           native_scale=False, ax=ax, legend=False)
         ax.set_title(METRIC_LABELS.get(metric, metric), fontsize=10)
@@ -129,7 +156,7 @@ def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
                for m in models]
     fig.legend(handles=handles, loc="lower center", ncol=min(len(models), 3), frameon=False,
                bbox_to_anchor=(0.5, -0.06))
-    fig.suptitle("Test results per scenario: mean over seeds, 95 % bootstrap CI", fontweight="bold")
+    fig.suptitle("Test results per scenario: mean over seeds, 95 % t interval over seeds", fontweight="bold")
     fig.tight_layout(rect=(0, 0.04, 1, 1))
     return save(fig, stem)
 

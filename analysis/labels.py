@@ -45,7 +45,7 @@ SHORT_LABELS = {"proposed": "Proposed", "min": "Min", "coordinate": "Coordinate"
                 "proposed_layer_at_test": "Proposed (layer at test)", "min_layer_at_test": "Min (layer at test)",
                 "coordinate_layer_at_test": "Coordinate (layer at test)", "human": "Human", "idm_mobil": "IDM+MOBIL",
                 "idm_mobil_limits": "IDM+MOBIL (host limits)", "idm_limits": "IDM (host limits)", "random": "Random"}
-PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "proposed_enriched": "#6fb3e0",
+PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "proposed_enriched": "#e7298a",
            "proposed_guarded": "#0b3c61", "min_guarded": "#8a1f30", "coordinate_guarded": "#175c22",
            "proposed_layer_at_test": "#7f9db9", "min_layer_at_test": "#e3a1aa", "coordinate_layer_at_test": "#94c99c",
            "human": "#555555", "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "idm_limits": "#c9a227",

@@ -8,12 +8,13 @@ from pathlib import Path
 
 import pandas as pd
 
-from analysis.claims import ClaimResult
+from analysis.claims import ClaimResult, verdict_sentence
 from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
-from analysis.report import fmt_estimate
-from analysis.scale import is_smoke, scale_text
+from analysis.report import HEADLINE_NOTE, fmt_estimate, headline_rows
+from analysis.scale import is_smoke, scale_lines
 from analysis.sections import Section, markdown_lines
-from analysis.tables import CLOSE_NOTE, PAPER_TABLE6, SAFE_COLLISIONS, beating_grid
+from analysis.stats import coverage_text
+from analysis.tables import CLOSE_NOTE, PAPER_TABLE6, SAFE_COLLISIONS, beating_grid, headline
 
 # The metrics shown beside the return: what a test score alone hides (a fast host that crashes).
 SIDE_METRICS = ("collisions", "avg_speed_kmh", "dangerous_actions")
@@ -59,6 +60,14 @@ def beating_lines(beating: pd.DataFrame, scenarios: list[str]) -> list[str]:
     return [*lines, ""]
 
 
+def headline_lines(evals: pd.DataFrame, scenarios: list[str]) -> list[str]:
+    """The headline table (return and collisions per host, scenario 3 and the mean of scenarios) in Markdown."""
+    rows = headline_rows(headline(evals, scenarios))
+    out = ["| " + " | ".join(rows[0]) + " |", "|---|---:|" + "---:|" * (len(rows[0]) - 2)]
+    out += ["| " + " | ".join(row) + " |" for row in rows[1:]]
+    return out
+
+
 def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
                      evals: pd.DataFrame, commits: list[str], figures: dict[str, dict[str, Path]],
                      out_dir: Path, beating: pd.DataFrame | None = None,
@@ -68,9 +77,15 @@ def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: 
         or sorted(set(summary["scenario"]))
     banner = ["**Smoke run: not a result.** The `smoke` preset trains for seconds to prove that the pipeline "
               "runs; its numbers and verdicts mean nothing.", ""] if is_smoke(configs) else []
-    lines = ["# Results", "", *banner, f"Scale: {scale_text(configs, evals)}",
+    lines = ["# Results", "", *banner,
+             "## What each host earns and how often it crashes", "", *headline_lines(evals, scenarios), "",
+             HEADLINE_NOTE, "",
+             "## The paper's claims in one line each", "",
+             *[f"{c.number}. {c.statement} **{c.verdict}**: {verdict_sentence(c)}" for c in claims], "",
+             coverage_text(), "",
+             "## Scale", "", *[f"- {line}" for line in scale_lines(configs, evals)], "",
              f"Runs from commit{'s' if len(commits) != 1 else ''} {', '.join(c[:10] for c in commits) or 'unknown'}. "
-             "Cells: mean over seeds [95% bootstrap CI over seeds].", "",
+             "Every other table: mean over seeds [95% t interval over seeds].", "",
              "## Test return per episode (the paper's Table 6; its numbers in parentheses)", "",
              *_grid(summary, "episode_return", scenarios, paper=True), "",
              "The paper does not say what its test score sums; ours is the mean return of a test episode under "
@@ -81,7 +96,7 @@ def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: 
             lines += [f"## {METRIC_LABELS[metric]}", "",
                       *_grid(summary, metric, scenarios, paper=False), ""]
     lines += beating_lines(beating if beating is not None else pd.DataFrame(), scenarios)
-    lines += ["## The paper's claims", "", "| # | Claim | Verdict | Evidence |", "|---|---|---|---|"]
+    lines += ["## The paper's claims: the evidence", "", "| # | Claim | Verdict | Evidence |", "|---|---|---|---|"]
     for claim in claims:
         evidence = "; ".join(c.text() for c in claim.comparisons).replace("|", "/")
         lines.append(f"| {claim.number} | {claim.statement} | **{claim.verdict}** | {evidence} |")

@@ -19,10 +19,10 @@ from analysis.labels import LEARNED, REFERENCE_HOSTS, SCENARIOS, fmt, model_labe
 from analysis.load import EVAL_METRICS, StoreData
 from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
-from analysis.report import ReportInputs, fmt_estimate, write_report
-from analysis.scale import is_smoke, scale_text
+from analysis.report import SHARED_CONFIG, ReportInputs, fmt_estimate, write_report
+from analysis.scale import is_smoke, scale_lines
 from analysis.scenarios import scenario_mix, with_cv_ratio
-from analysis.stats import mean_ci
+from analysis.stats import coverage_text, mean_ci
 from hgm_repro.contracts.config_tree import flatten
 
 
@@ -64,28 +64,57 @@ def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFram
     return scalars, vtypes, source
 
 
-def _config_texts(configs: dict[str, str]) -> dict[str, str]:
-    """The first model's config in full; for the others only the keys that differ from it."""
-    if not configs:
-        return {}
-    order = ordered_models(configs)
-    base_model = order[0]
-    out = {base_model: configs[base_model]}
+# Keys that differ from run to run by design (each evaluation run's scenario and seed): the test grid shows them.
+PER_RUN_KEYS = ("scenario", "seed")
+CONFIGS_NOTE = ("Each model's resolved config (of one of its evaluation runs) against the defaults that conf/ of "
+                "this checkout composes for that model (python -m hgm_repro model=<name>); scenario and seed vary "
+                "from run to run and are left out.")
+
+
+def _default_configs(models: list[str]) -> dict[str, dict[str, Any]]:
+    """The flattened default config of each model that conf/ knows (missing ones are left out)."""
     try:
-        base = flatten(yaml.safe_load(configs[base_model]) or {})
-    except yaml.YAMLError:
-        return {m: configs[m] for m in order}
-    for model in order[1:]:
-        try:
-            other = flatten(yaml.safe_load(configs[model]) or {})
-        except yaml.YAMLError:
-            out[model] = configs[model]
-            continue
-        diff = [f"{k}: {other.get(k, '<absent>')}    (vs {base.get(k, '<absent>')})"
-                for k in sorted(set(base) | set(other)) if base.get(k) != other.get(k)]
-        out[model] = (f"Keys that differ from {base_model}'s config:\n" + "\n".join(diff)) if diff else \
-            f"Same as {base_model}'s config."
+        from hydra import compose, initialize_config_dir
+        from omegaconf import OmegaConf
+
+        from hgm_repro.contracts.conf_dir import CONF_DIR
+    except ImportError:
+        return {}
+    known = [m for m in models if (Path(CONF_DIR) / "model" / f"{m}.yaml").is_file()]
+    out = {}
+    try:
+        with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
+            for model in known:
+                out[model] = flatten(OmegaConf.to_container(compose("config", overrides=[f"model={model}"])))
+    except Exception:  # noqa: BLE001 - a conf/ that does not compose leaves the appendix to say so
+        return {}
     return out
+
+
+def config_differences(configs: dict[str, str]) -> tuple[dict[str, list[tuple[str, str, str]]], str]:
+    """Per model, (key, value in its runs, default) for each setting that differs from the defaults, and a
+    note saying what the defaults are."""
+    order = ordered_models(configs)
+    defaults = _default_configs(order)
+    out: dict[str, list[tuple[str, str, str]]] = {}
+    for model in order:
+        try:
+            mine = flatten(yaml.safe_load(configs[model]) or {})
+        except yaml.YAMLError:
+            continue
+        base = defaults.get(model)
+        if base is None:  # a model conf/ does not know: compared with the first model's runs
+            base = defaults.get(order[0]) or {}
+        out[model] = [(k, str(mine.get(k, "(absent)")), str(base.get(k, "(absent)")))
+                      for k in sorted(set(mine) | set(base))
+                      if k.split(".")[0] not in PER_RUN_KEYS and mine.get(k) != base.get(k)]
+    note = CONFIGS_NOTE if defaults else ("conf/ could not be composed here, so the appendix has no defaults "
+                                          "to compare with.")
+    # What every model's runs share (a preset, settings newer than the runs) is printed once, not per model.
+    shared = set.intersection(*(set(rows) for rows in out.values())) if len(out) > 1 else set()
+    if shared:
+        out = {SHARED_CONFIG: sorted(shared), **{m: [r for r in rows if r not in shared] for m, rows in out.items()}}
+    return out, note
 
 
 def _training_numbers(curves: pd.DataFrame) -> dict[str, pd.DataFrame]:
@@ -220,6 +249,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         csvs.append(out_dir / "crash_anatomy.csv")
     sections = [s for s in (equal_terms.section(evals, data.curves, results), crash_section) if s is not None]
 
+    configs, configs_note = config_differences(data.configs)
     inputs = ReportInputs(
         tracking_uri=data.tracking_uri, experiment=data.experiment, git_commits=data.git_commits,
         seed_counts=counts, train_seeds=train_seeds, notes=_coverage_notes(data),
@@ -228,10 +258,11 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         test_grids=grids, paper_table=tables.paper_table6(), aggregate=_aggregate_text(evals, scenarios),
         beating=tables.beating_grid(beating, scenarios) if not beating.empty else pd.DataFrame(),
         claims=results, discussion=discussion(results, counts, len(train_runs), evals),
-        configs=_config_texts(data.configs),
+        configs=configs, configs_note=configs_note,
+        headline=tables.headline(evals, scenarios), intervals=coverage_text(),
         git_dirty=data.git_dirty, scenario_mix=scenario_mix(data.runs),
         train_keys=sorted(str(k) for k in train_runs["train_key"].dropna().unique()),
-        scale=scale_text(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
+        scale=scale_lines(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
         config_runs=_config_runs(data.configs), sections=sections,
     )
     markdown = out_dir / "results.md"

@@ -13,18 +13,18 @@ from fpdf import FPDF
 from fpdf.fonts import FontFace
 from PIL import Image
 
-from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
+from analysis.claims import NOT_SUPPORTED, SUPPORTED, TIE, ClaimResult, verdict_sentence
 from analysis.labels import METRIC_LABELS, SCENARIOS, VEHICLE_PARAMETERS, fmt, model_label, parameter_label
 from analysis.scenarios import PAPER_CV_RATIO
 from analysis.sections import Section, write_pdf_section
-from analysis.tables import CLOSE_NOTE, SAFE_COLLISIONS
+from analysis.tables import CLOSE_NOTE, HEADLINE_METRICS, HEADLINE_SCENARIO, SAFE_COLLISIONS
 
 # matplotlib ships DejaVu: embedding it makes any Unicode in configs or labels safe, unlike the
 # latin-1 core fonts.
 _FONT_DIR = Path(matplotlib.get_data_path()) / "fonts" / "ttf"
 SECTION_TITLES = ("Data used", "Environment and scenarios", "Average speed", "Lane changes", "Overtakes",
                   "Test results", "The paper's claims", "Discussion", "Appendix: configuration and commits")
-VERDICT_COLOURS = {SUPPORTED: (46, 147, 60), NOT_SUPPORTED: (209, 73, 91)}
+VERDICT_COLOURS = {SUPPORTED: (46, 147, 60), NOT_SUPPORTED: (209, 73, 91), TIE: (90, 90, 90)}
 
 
 @dataclass
@@ -49,16 +49,21 @@ class ReportInputs:
     beating: pd.DataFrame  # model x scenario 'k of n': seeds beating the human-driven host safely
     claims: list[ClaimResult]
     discussion: list[str]
-    configs: dict[str, str]  # model -> resolved config text (or a diff against the first)
+    configs: dict[str, list[tuple[str, str, str]]]  # model -> (key, value in its runs, default) that differ
     train_keys: list[str] = field(default_factory=list)  # of the training runs
     git_dirty: str = ""  # "true"/"false"/"mixed" from the runs' git_dirty tags
     scenario_mix: pd.DataFrame | None = None  # scenario x NCV/AHV/CHV, as the evaluation runs logged it
-    scale: str = ""  # preset, steps, images, checkpoint, episodes per cell, beside the paper's
+    scale: list[str] = field(default_factory=list)  # one line per preset: steps, images, checkpoint, episodes
+    headline: pd.DataFrame | None = None  # tables.headline: return and collisions per host, scenario 3 and mean
+    intervals: str = ""  # the interval method and its measured coverage
+    configs_note: str = ""  # what the configs are compared with
     smoke: bool = False  # made with the smoke preset: not a result
     source: str = ""  # where the data came from, as the cover names it (no machine path for a bundle)
     config_runs: dict[str, str] = field(default_factory=dict)  # model -> which run its config is from
     sections: list[Section] = field(default_factory=list)  # after the claims: crash anatomy, on equal terms
 
+
+SHARED_CONFIG = "every model"  # the appendix's entry for settings all models' runs share
 
 SMOKE_BANNER = ("SMOKE RUN: NOT A RESULT. The smoke preset trains for a few hundred steps to prove that the "
                 "pipeline runs end to end; its numbers, figures and verdicts say nothing about the paper.")
@@ -134,10 +139,14 @@ class ReportWriter:
         if self.pdf.get_y() + mm > self.pdf.h - self.pdf.b_margin:
             self.pdf.add_page()
 
-    def image(self, path: Path, width: float | None = None, caption: str | None = None) -> None:
+    def image_height(self, path: Path, width: float | None = None) -> float:
         w = min(width or self.width, self.width)
         with Image.open(path) as im:
-            h = w * im.height / im.width
+            return w * im.height / im.width
+
+    def image(self, path: Path, width: float | None = None, caption: str | None = None) -> None:
+        w = min(width or self.width, self.width)
+        h = self.image_height(path, width)
         self.keep(h + 10)
         x = self.pdf.l_margin + (self.width - w) / 2
         self.pdf.image(str(path), x=x, w=w)
@@ -170,7 +179,7 @@ class ReportWriter:
 
     def verdict(self, result: ClaimResult) -> None:
         self.keep(30)
-        colour = VERDICT_COLOURS.get(result.verdict, (200, 140, 20))
+        colour = VERDICT_COLOURS.get(result.verdict, (200, 140, 20))  # inconclusive: amber
         self.pdf.set_font("DejaVu", "B", 10.5)
         self.pdf.multi_cell(0, 5.5, f"Claim {result.number}. {result.statement}", align="L",
                             new_x="LMARGIN", new_y="NEXT")
@@ -196,31 +205,90 @@ def claim_numbers(claims: Sequence[ClaimResult], verdict: str) -> str:
     return f"claims {', '.join(numbers[:-1])} and {numbers[-1]}"
 
 
+def _headline_cell(row: pd.Series, metric: str, where: str) -> str:
+    n = row[f"{metric}/{where}/n"]
+    return fmt_estimate(row[f"{metric}/{where}/point"], row[f"{metric}/{where}/low"], row[f"{metric}/{where}/high"],
+                        0 if pd.isna(n) else int(n), metric)
+
+
+def headline_rows(headline: pd.DataFrame) -> list[list[str]]:
+    """The headline table as rows of text, heading row first (shared by the PDF and results.md)."""
+    head = ["Host", "Seeds"]
+    for metric in HEADLINE_METRICS:
+        what = METRIC_LABELS[metric].replace(" per episode", "")
+        head += [f"{what}, scenario {HEADLINE_SCENARIO}", f"{what}, mean of scenarios"]
+    rows = [head]
+    for _, row in headline.iterrows():
+        n = row[f"{HEADLINE_METRICS[0]}/mean/n"]
+        rows.append([model_label(row["model"], short=True), "-" if pd.isna(n) else str(int(n)),
+                     *[_headline_cell(row, m, w) for m in HEADLINE_METRICS for w in ("scenario", "mean")]])
+    return rows
+
+
+HEADLINE_NOTE = (f"Per test episode: mean over seeds [its 95 % interval over seeds]. Scenario "
+                 f"{HEADLINE_SCENARIO} has the training traffic's mix (CV ratio 0.5); the mean of scenarios averages "
+                 "each seed over scenarios 1-5 first. An episode ends at its time limit or at the host's first "
+                 "collision, so collisions per episode is the share of episodes that end in a crash.")
+
+
+def _claims_table(w: ReportWriter, claims: Sequence[ClaimResult]) -> None:
+    """One row per claim: the claim, its verdict in colour, and the sentence that says what decides it."""
+    w.pdf.set_font("DejaVu", size=8)
+    w.keep(20)
+    with w.pdf.table(col_widths=[3.2, 1.05, 3.9], text_align=["LEFT", "CENTER", "LEFT"], line_height=3.9,
+                     headings_style=FontFace(emphasis="BOLD", fill_color=(230, 234, 240)), padding=(0.8, 1.2),
+                     width=w.width) as table:
+        head = table.row()
+        for text in ("The paper's claim", "Verdict", "What decides it"):
+            head.cell(text)
+        for result in claims:
+            row = table.row()
+            row.cell(f"{result.number}. {result.statement}")
+            row.cell(result.verdict, style=FontFace(emphasis="BOLD",
+                                                    color=VERDICT_COLOURS.get(result.verdict, (200, 140, 20))))
+            row.cell(verdict_sentence(result))
+    w.pdf.set_font("DejaVu", size=10)
+    w.space(2)
+
+
 def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
+    """Page 1 answers: what the hosts earn and how often they crash, each claim's verdict, the scale."""
     pdf = w.pdf
     pdf.add_page()
-    pdf.ln(20 if inp.smoke else 30)
-    pdf.set_font("DejaVu", "B", 20)
-    pdf.multi_cell(0, 10, "Reproduction report" + (" (smoke run)" if inp.smoke else ""), align="C",
+    pdf.set_font("DejaVu", "B", 16)
+    pdf.multi_cell(0, 8, "Reproduction report" + (" (smoke run)" if inp.smoke else ""), align="C",
                    new_x="LMARGIN", new_y="NEXT")
-    pdf.set_font("DejaVu", "", 13)
-    pdf.multi_cell(0, 7, "Deep RL driving decisions in heterogeneous highway traffic with a Hyper-Grid "
-                         "Matrix (Bai et al.): our runs against the paper's claims", align="C",
+    pdf.set_font("DejaVu", "", 10.5)
+    pdf.multi_cell(0, 5.5, "Deep RL driving decisions in heterogeneous highway traffic with a Hyper-Grid "
+                           "Matrix (Bai et al.): our runs against the paper's claims", align="C",
                    new_x="LMARGIN", new_y="NEXT")
-    pdf.ln(6)
+    pdf.ln(3)
     if inp.smoke:
         pdf.set_fill_color(253, 226, 226)
         pdf.set_text_color(170, 20, 20)
-        pdf.set_font("DejaVu", "B", 11)
-        pdf.multi_cell(0, 6, SMOKE_BANNER, align="C", fill=True, border=1, padding=3, new_x="LMARGIN",
+        pdf.set_font("DejaVu", "B", 10)
+        pdf.multi_cell(0, 5.5, SMOKE_BANNER, align="C", fill=True, border=1, padding=2, new_x="LMARGIN",
                        new_y="NEXT")
         pdf.set_text_color(0)
         pdf.set_fill_color(255)  # tables fill their cells with the current colour
         pdf.set_font("DejaVu", size=10)
-        pdf.ln(4)
-    pdf.set_font("DejaVu", "B", 10)
-    pdf.multi_cell(0, 5.5, "Scale of these runs", new_x="LMARGIN", new_y="NEXT")
-    w.para(f"{inp.scale} Every verdict below holds at this scale only.", size=9.5)
+        pdf.ln(2)
+    if inp.headline is not None and not inp.headline.empty:
+        w.heading("What each host earns and how often it crashes", keep_mm=60)
+        w.table(headline_rows(inp.headline), col_widths=[1.45, 0.45, 1.3, 1.3, 1.3, 1.3], size=7.5)
+        pdf.set_y(pdf.get_y() - 2)
+        w.para(HEADLINE_NOTE, size=7.5, italic=True)
+    w.heading("The paper's claims", keep_mm=40)
+    _claims_table(w, inp.claims)
+    if inp.intervals:
+        w.para(inp.intervals, size=7.5, italic=True)
+    w.heading("Scale of these runs", keep_mm=15)
+    w.bullets(inp.scale or ["Scale unknown."], size=8)
+    pdf.set_font("DejaVu", "I", 8)
+    pdf.multi_cell(0, 4, "Every number and verdict in this report holds at this scale only.", new_x="LMARGIN",
+                   new_y="NEXT")
+    pdf.set_font("DejaVu", size=10)
+    w.space(2)
     info = [
         ["Generated", dt.datetime.now().strftime("%Y-%m-%d %H:%M")],
         ["Data", inp.source or inp.tracking_uri],
@@ -229,14 +297,8 @@ def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
         ["Uncommitted changes (git_dirty)", inp.git_dirty or "not recorded"],
         ["Training configurations", f"{len(inp.train_keys)} train_keys of the learned models' training runs "
                                     "(listed in the appendix)" if inp.train_keys else "no training runs"],
-        ["Supported", claim_numbers(inp.claims, SUPPORTED)],
-        ["Not supported", claim_numbers(inp.claims, NOT_SUPPORTED)],
-        ["Inconclusive", claim_numbers(inp.claims, INCONCLUSIVE)],
     ]
-    w.table(info, col_widths=[1.0, 2.2], size=9, align="LEFT", headings=False)
-    w.para("The paper's seven claims are listed by number above and stated in section 7. Every interval in "
-           "this report is a 95 % percentile bootstrap over seeds (runs), stratified by scenario; episodes "
-           "inside one run are never treated as independent replications.", size=9, italic=True)
+    w.table(info, col_widths=[1.0, 2.2], size=7.5, align="LEFT", headings=False)
     pdf.add_page()
     pdf.insert_toc_placeholder(_toc, pages=1)
 
@@ -306,11 +368,14 @@ def _environment_section(w: ReportWriter, inp: ReportInputs) -> None:
                 ["AHV ratio", *[f"{(1 - v) / 2:.3f}" for v in PAPER_CV_RATIO.values()]],
                 ["CHV ratio", *[f"{(1 - v) / 2:.3f}" for v in PAPER_CV_RATIO.values()]]]
     w.table(rows, size=8.5)
-    w.heading("What the host sees in each scenario")
+    # The heading stays on the page of its figure.
+    w.heading("What the host sees in each scenario",
+              keep_mm=w.image_height(inp.figures["scenes"]) + 30 if "scenes" in inp.figures else 30)
     if "scenes" in inp.figures:
-        w.image(inp.figures["scenes"], caption="Top: the host's front camera. Bottom: the Hyper-Grid Matrix "
-                "(red = faster than the mid speed (v_max+v_min)/2, blue = slower, white = mid speed or empty "
-                "cell). Only connected vehicles appear in the HGM, so it fills up as the CV ratio grows.")
+        w.image(inp.figures["scenes"], caption="Top: the host's front camera. Bottom: the Hyper-Grid Matrix in "
+                "metres around the host (forward is up; colours scaled to the speed limits: red = faster than the "
+                "mid speed (v_max+v_min)/2, blue = slower, white = mid speed or empty cell). Only connected "
+                "vehicles appear in the HGM, so it fills up as the CV ratio grows.")
     else:
         w.para(inp.pictures_note or "Pictures not available.", size=9, italic=True)
 
@@ -321,11 +386,12 @@ def _training_section(w: ReportWriter, inp: ReportInputs, index: int, name: str,
         w.para(f"No training curves of {what} in the store.")
         return
     w.image(inp.figures[name], caption=f"{what.capitalize()} against environment steps: line = mean over "
-            "seeds of each method's binned curve, band = 95 % bootstrap CI over seeds (no band with one seed). "
-            "Dashed: evaluation means of the non-learning hosts, for reference.")
+            "seeds of each method's binned curve, band = 95 % t interval over seeds (no band with one seed). "
+            "Dashed: evaluation means of the non-learning hosts, for reference. A variant trained for longer has "
+            "its own panel, so the paper's three methods keep their own step range.")
     numbers = inp.training_numbers.get(name)
     if numbers is not None and not numbers.empty:
-        w.heading("Per-seed summaries (mean over seeds, 95 % CI)")
+        w.heading("Per-seed summaries (mean over seeds, 95 % interval)")
         rows = [list(numbers.columns)] + numbers.astype(str).to_numpy().tolist()
         w.table(rows, col_widths=[1.6] + [1.0] * (len(numbers.columns) - 1), size=8)
 
@@ -333,7 +399,7 @@ def _training_section(w: ReportWriter, inp: ReportInputs, index: int, name: str,
 def _test_section(w: ReportWriter, inp: ReportInputs) -> None:
     w.section(SECTION_TITLES[5])
     w.heading("Table 6 (ours): mean test episode return per method and scenario")
-    w.para("Mean over seeds with its 95 % CI below it. Our score is the mean episode return "
+    w.para("Mean over seeds with its 95 % interval below it. Our score is the mean episode return "
            "(Algorithm 2's reward summed over an episode); the paper does not say what its score is.", size=9)
     grid = inp.test_grids.get("episode_return")
     if grid is None or grid.empty:
@@ -344,10 +410,11 @@ def _test_section(w: ReportWriter, inp: ReportInputs) -> None:
     w.frame_table(inp.paper_table.astype(str), "Method (paper)", size=8.5, first_width=1.6)
     if not inp.aggregate.empty:
         w.heading("Across scenarios: mean, IQM and probability of improvement of the episode return")
-        w.para("Mean = mean over scenarios of the per-scenario mean over seeds; IQM = interquartile mean of "
-               "all (scenario, seed) scores; P(Proposed > X) = chance that a random seed of Proposed beats a "
-               "random seed of X in the same scenario, averaged over scenarios (Agarwal et al. 2021). All CIs "
-               "by stratified bootstrap over seeds.", size=8.5)
+        w.para("Mean = each seed averaged over the scenarios, then the mean over seeds with its t interval; "
+               "IQM = interquartile mean of all (scenario, seed) scores; P(Proposed > X) = chance that a random "
+               "seed of Proposed beats a random seed of X in the same scenario, averaged over scenarios (Agarwal "
+               "et al. 2021). IQM and P are points: no interval for them has been shown to cover at five seeds.",
+               size=8.5)
         rows = [list(inp.aggregate.columns)] + inp.aggregate.astype(str).to_numpy().tolist()
         w.table(rows, col_widths=[1.7, 0.8, 1.4, 1.4, 1.4], size=8)
     if not inp.beating.empty:
@@ -363,12 +430,12 @@ def _test_section(w: ReportWriter, inp: ReportInputs) -> None:
             w.para(CLOSE_NOTE, size=8)
     if "fig_test_results" in inp.figures:
         w.image(inp.figures["fig_test_results"], caption="Every test metric per scenario: mean over seeds and "
-                "95 % bootstrap CI; scenario k has CV ratio (k-1)/4.")
+                "95 % t interval over seeds; scenario k has CV ratio (k-1)/4.")
     for metric, grid in inp.test_grids.items():
         if metric == "episode_return" or grid.empty:
             continue
         # Keep the heading on the page of its table.
-        w.heading(f"{METRIC_LABELS.get(metric, metric)}: mean and 95 % CI over seeds",
+        w.heading(f"{METRIC_LABELS.get(metric, metric)}: mean and 95 % interval over seeds",
                   keep_mm=_grid_table_height(grid))
         _grid_table(w, grid)
 
@@ -387,12 +454,11 @@ def _grid_table(w: ReportWriter, grid: pd.DataFrame) -> None:
 
 def _claims_section(w: ReportWriter, inp: ReportInputs) -> None:
     w.section(SECTION_TITLES[6])
-    if inp.scale:
-        w.para(f"Judged on runs at this scale: {inp.scale}", size=9, italic=True)
-    w.para("Each claim is split into signed differences (positive = what the paper says). A difference "
-           "supports the claim when its 95 % CI lies above 0, contradicts it when the CI lies below 0, and "
-           "is undecided otherwise or with fewer than 3 seeds. A claim needs all its differences to hold; "
-           "one contradiction makes it not supported.", size=9)
+    w.para("Each claim is split into signed differences (positive = what the paper says), each with its 95 % "
+           "Student-t interval over seeds. A difference supports the claim when its interval lies above 0, "
+           "contradicts it when the interval lies below 0, and is a tie when the interval covers 0; with fewer "
+           "than 3 seeds it is undecided. A claim needs all its differences to hold; one contradiction makes it "
+           "not supported; otherwise a tie makes it a tie.", size=9)
     rows = [["Claim", "Statement", "Verdict"]] + [[str(r.number), r.statement, r.verdict] for r in inp.claims]
     w.table(rows, col_widths=[0.5, 5.0, 1.2], size=8.5, align="LEFT")
     for result in inp.claims:
@@ -402,18 +468,26 @@ def _claims_section(w: ReportWriter, inp: ReportInputs) -> None:
 def _appendix(w: ReportWriter, inp: ReportInputs) -> None:
     w.section(SECTION_TITLES[8])
     w.para("Git commit(s) recorded on the runs used: " + (", ".join(inp.git_commits) or "none recorded") + ".")
-    if not inp.configs:
-        w.para("No resolved config.yaml artifact was found on the evaluation runs.")
     if inp.train_keys:
         w.para("Training configurations (train_key of each training run): " + ", ".join(inp.train_keys) + ".",
-               size=8.5)
-    for model, text in inp.configs.items():
-        which = inp.config_runs.get(model)
-        w.heading(f"Resolved configuration: {model_label(model)}" + (f" ({which})" if which else ""))
-        w.pdf.set_font("DejaVuMono", size=6.5)
-        w.pdf.multi_cell(0, 3.0, text, align="L", new_x="LMARGIN", new_y="NEXT")
-        w.pdf.set_font("DejaVu", size=10)
-        w.space(2)
+               size=8)
+    if not inp.configs:
+        w.para("No resolved config.yaml artifact was found on the evaluation runs.")
+        return
+    w.heading("Settings that differ from the defaults")
+    if inp.configs_note:
+        w.para(inp.configs_note, size=8.5)
+    for model, rows in inp.configs.items():
+        which = f" ({inp.config_runs[model]})" if model in inp.config_runs else ""
+        title = "Every model's runs" if model == SHARED_CONFIG else model_label(model) + which
+        if not rows:
+            w.para(f"{title}: nothing else differs.", size=8.5)
+            continue
+        w.pdf.set_font("DejaVu", "B", 9)
+        w.keep(12 + 4.5 * len(rows))
+        w.pdf.multi_cell(0, 5, title, new_x="LMARGIN", new_y="NEXT")
+        w.table([["Setting", "In these runs", "Default"], *[list(r) for r in rows]], col_widths=[2.2, 1.6, 1.6],
+                size=8, align="LEFT")
 
 
 def write_report(inp: ReportInputs, path: Path) -> Path:
@@ -431,9 +505,8 @@ def write_report(inp: ReportInputs, path: Path) -> Path:
     for extra in inp.sections:
         write_pdf_section(w, extra)
     w.section(SECTION_TITLES[7])
-    if inp.scale:
-        w.para(f"Scale of these runs: {inp.scale} What follows holds at this scale only"
-               + (": these are smoke runs, not a result." if inp.smoke else "."), size=9, italic=True)
+    if inp.smoke:
+        w.para("These are smoke runs: what follows is not a result.", size=9, italic=True)
     for para in inp.discussion:
         w.para(para)
     _appendix(w, inp)

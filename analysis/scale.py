@@ -1,6 +1,6 @@
 """The scale a set of runs was made at, beside the paper's, read from the runs' own resolved configs.
 
-The report's first page and results.md both open with it: a verdict means little without the
+The report's first page and results.md both state it, once: a verdict means little without the
 training budget, the image size and the number of test episodes behind it.
 """
 
@@ -11,7 +11,7 @@ from typing import Any
 import pandas as pd
 import yaml
 
-from analysis.labels import model_label
+from analysis.labels import model_label, ordered_models
 
 PAPER_STEPS = 1_000_000
 SMOKE_PRESET = "smoke"
@@ -38,28 +38,37 @@ def is_smoke(configs: dict[str, str]) -> bool:
     return SMOKE_PRESET in presets(configs)
 
 
-def scale_text(configs: dict[str, str], evals: pd.DataFrame) -> str:
-    """Preset, training steps, image size and frames, the checkpoint tested and the test episodes
-    per cell, each beside the paper's; from a learned model's config (the proposed one first)."""
+def scale_lines(configs: dict[str, str], evals: pd.DataFrame) -> list[str]:
+    """One line per experiment preset of the learned models: which models, training steps, image size and
+    frames, the checkpoint tested and the test episodes per cell, each beside the paper's."""
     parsed = _configs(configs)
-    config = parsed.get("proposed") or next((c for c in parsed.values() if c.get("model", {}).get("learned")),
-                                            next(iter(parsed.values()), {}))
-    learner, obs = config.get("learner", {}), config.get("observation", {})
-    parts = []
-    if learner:
-        steps = learner.get("total_steps", 0)
-        # A model trained at another budget (a variant published beside the grid) says so here.
-        others = "".join(f", {model_label(m, short=True)} {c['learner']['total_steps']:,}"
-                         for m, c in sorted(parsed.items()) if c.get("model", {}).get("learned")
-                         and c.get("learner", {}).get("total_steps", steps) != steps)
-        parts.append(f"preset `{', '.join(presets(configs)) or '?'}`: {steps:,} "
-                     f"training steps per seed{others} (paper {PAPER_STEPS:,}), "
-                     f"images {obs.get('height')}x{obs.get('width')} with {obs.get('frame_stack')} frames "
-                     "(paper 84x84, 4)")
-        parts.append(f"tested with the `{config.get('eval', {}).get('checkpoint', 'final')}` checkpoint "
-                     "(paper: the final network)")
-    if "n_episodes" in evals and not evals.empty:
-        episodes = sorted({int(n) for n in evals["n_episodes"].dropna()})
-        parts.append(f"{'/'.join(map(str, episodes))} test episodes per cell (paper: 200,000 decisions, "
-                     "about 834 episodes)")
-    return "; ".join(parts) + "." if parts else "scale unknown: the runs logged no config."
+    learned = {m: c for m, c in parsed.items() if c.get("model", {}).get("learned") and c.get("learner")}
+    groups: dict[str, list[str]] = {}
+    for model in ordered_models(learned):
+        groups.setdefault(str(learned[model].get("experiment", {}).get("name", "unnamed preset")), []).append(model)
+    lines = []
+    for preset, models in groups.items():
+        config = learned[models[0]]
+        learner, obs = config.get("learner", {}), config.get("observation", {})
+        part = [f"{preset} ({', '.join(model_label(m, short=True) for m in models)}): "
+                f"{learner.get('total_steps', 0):,} training steps per seed (paper {PAPER_STEPS:,})",
+                f"images {obs.get('height')}x{obs.get('width')}, {obs.get('frame_stack')} frames (paper 84x84, 4)",
+                f"tested with the {config.get('eval', {}).get('checkpoint', 'final')} checkpoint (paper: the final "
+                "network)"]
+        episodes = _episodes(evals, models)
+        if episodes:
+            part.append(f"{episodes} test episodes per cell (paper: about 834)")
+        lines.append("; ".join(part) + ".")
+    if not lines and parsed:
+        episodes = _episodes(evals, list(parsed))
+        lines.append(f"{', '.join(presets(configs)) or 'unnamed preset'}: no learned model"
+                     + (f"; {episodes} test episodes per cell." if episodes else "."))
+    return lines or ["Scale unknown: the runs logged no config."]
+
+
+def _episodes(evals: pd.DataFrame, models: list[str]) -> str:
+    """'48' or '4/8': the test episodes per cell of `models`."""
+    if "n_episodes" not in evals or evals.empty:
+        return ""
+    rows = evals[evals["model"].isin(models)] if "model" in evals else evals
+    return "/".join(str(n) for n in sorted({int(n) for n in rows["n_episodes"].dropna()}))

@@ -11,6 +11,7 @@ from mlflow import MlflowClient
 from pypdf import PdfReader
 
 from analysis.__main__ import main
+from analysis.claims import VERDICTS
 from analysis.figures import image_variance
 from analysis.labels import fmt
 from analysis.load import load_store
@@ -94,7 +95,7 @@ def test_figures_exist_in_raster_and_vector_and_are_not_blank(full_report: Path)
 def test_claims_in_report_and_csv(full_report: Path, full_text: str) -> None:
     claims = pd.read_csv(full_report / "claims.csv")
     assert list(claims["claim"]) == [1, 2, 3, 4, 5, 6, 7]
-    assert set(claims["verdict"]) <= {"supported", "not supported", "inconclusive"}
+    assert set(claims["verdict"]) <= set(VERDICTS)
     # The synthetic store has every effect the paper claims, large against seed noise.
     assert (claims.set_index("claim").loc[[1, 2, 3, 7], "verdict"] == "supported").all()
     assert "Verdict: SUPPORTED" in full_text

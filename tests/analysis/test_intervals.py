@@ -44,7 +44,7 @@ def test_welch_interval_covers_a_difference_of_two_unpaired_groups_of_five(distr
 def test_the_report_states_the_coverage_it_measures() -> None:
     text = coverage_text()
     for distribution in DISTRIBUTIONS:
-        assert f"{measured_coverage('t', distribution):.3f} ({distribution})" in text
+        assert f"{measured_coverage('t', distribution):.3f} for {distribution} data" in text
         assert f"{measured_coverage('percentile bootstrap', distribution):.3f}" in text
 
 

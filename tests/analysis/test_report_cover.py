@@ -9,7 +9,7 @@ from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
 from analysis.discussion import discussion
 from analysis.pipeline import _config_runs, _models_with_several_training_configs
 from analysis.report import claim_numbers
-from analysis.scale import is_smoke, scale_text
+from analysis.scale import is_smoke, scale_lines
 
 SMOKE_CONFIG = """experiment: {name: smoke}
 learner: {total_steps: 256}
@@ -27,22 +27,22 @@ def _claims() -> list[ClaimResult]:
 
 
 def test_scale_states_ours_beside_the_papers() -> None:
-    evals = pd.DataFrame({"n_episodes": [4, 4, 8]})
-    text = scale_text({"proposed": SMOKE_CONFIG}, evals)
-    assert text == ("preset `smoke`: 256 training steps per seed (paper 1,000,000), images 36x36 with 2 frames "
-                    "(paper 84x84, 4); tested with the `final` checkpoint (paper: the final network); 4/8 test "
-                    "episodes per cell (paper: 200,000 decisions, about 834 episodes).")
+    evals = pd.DataFrame({"model": ["proposed"] * 3, "n_episodes": [4, 4, 8]})
+    assert scale_lines({"proposed": SMOKE_CONFIG}, evals) == [
+        "smoke (Proposed): 256 training steps per seed (paper 1,000,000); images 36x36, 2 frames (paper 84x84, 4); "
+        "tested with the final checkpoint (paper: the final network); 4/8 test episodes per cell (paper: about 834)."]
     assert is_smoke({"proposed": SMOKE_CONFIG}) and not is_smoke({"proposed": "experiment: {name: quick}\n"})
-    assert scale_text({}, pd.DataFrame()) == "scale unknown: the runs logged no config."
+    assert scale_lines({}, pd.DataFrame()) == ["Scale unknown: the runs logged no config."]
 
 
-def test_scale_names_a_model_trained_at_another_budget() -> None:
+def test_scale_gives_each_preset_its_own_line_without_markup() -> None:
     variant = SMOKE_CONFIG.replace("smoke", "quick160").replace("256", "160000")
     human = "experiment: {name: smoke}\nmodel: {learned: false}\n"
-    text = scale_text({"proposed": SMOKE_CONFIG, "proposed_enriched": variant, "human": human}, pd.DataFrame())
-    assert text.startswith("preset `quick160, smoke`: 256 training steps per seed, Variant: enriched HGM 160,000 "
-                           "(paper 1,000,000)")
-    assert "Variant" not in scale_text({"proposed": SMOKE_CONFIG, "human": human}, pd.DataFrame())
+    lines = scale_lines({"proposed": SMOKE_CONFIG, "proposed_enriched": variant, "human": human}, pd.DataFrame())
+    assert [line.split(":")[0] for line in lines] == ["smoke (Proposed)", "quick160 (Variant"]
+    assert lines[1].startswith("quick160 (Variant: enriched HGM): 160,000 training steps per seed")
+    assert not any("`" in line for line in lines)
+    assert len(scale_lines({"proposed": SMOKE_CONFIG, "human": human}, pd.DataFrame())) == 1
 
 
 def test_claims_are_listed_by_number_never_as_a_count() -> None:
@@ -52,8 +52,8 @@ def test_claims_are_listed_by_number_never_as_a_count() -> None:
     assert claim_numbers(claims, INCONCLUSIVE) == "claims 5 and 6"
     assert claim_numbers(claims[:4], SUPPORTED) == "none"
     first = discussion(claims, pd.DataFrame(), 1, pd.DataFrame())[0]
-    assert first == ("Of the paper's seven claims, our runs support one claim (7), contradict four claims "
-                     "(1, 2, 3 and 4) and leave two claims (5 and 6) undecided.")
+    assert first.startswith("Of the paper's seven claims, our runs support one claim (7), contradict four claims "
+                            "(1, 2, 3 and 4), find a tie in none and leave two claims (5 and 6) undecided.")
 
 
 def test_seeds_alone_are_not_several_training_configs() -> None:

@@ -51,21 +51,25 @@ def test_report_from_a_real_smoke_sweep(swept: Path, store_report: Path) -> None
     for name in ("fig5_speed", "fig_test_results"):
         assert image_variance(out / f"{name}.png") > 0
     assert "1 seed" in text  # one seed: the report says there is no interval instead of inventing one
-    # Page 1: a smoke run says it is not a result, and states its scale beside the paper's; the
-    # claims are listed by number in three groups.
+    # Page 1 answers: a smoke run says it is not a result; what each host earns and how often it crashes,
+    # every claim with its verdict, and the scale beside the paper's in one line, without markup.
     first = " ".join((PdfReader(str(out / "report.pdf")).pages[0].extract_text() or "").split())
-    for needed in ("SMOKE RUN: NOT A RESULT", "Scale of these runs", "preset `smoke`: 256 training steps per seed "
-                   "(paper 1,000,000), images 36x36 with 2 frames (paper 84x84, 4)", "checkpoint (paper: the final "
-                   "network)", "test episodes per cell (paper: 200,000 decisions", "Supported", "Not supported",
-                   "Inconclusive"):
+    for needed in ("SMOKE RUN: NOT A RESULT", "What each host earns and how often it crashes",
+                   "Episode return, scenario 3", "Collisions, mean of scenarios", "Human", "Scale of these runs",
+                   "smoke (Proposed): 256 training steps per seed (paper 1,000,000); images 36x36, 2 "
+                   "frames (paper 84x84, 4)", "checkpoint (paper: the final network)",
+                   "test episodes per cell (paper: about 834)", "Student-t", "coverage", "inconclusive"):
         assert needed in first, (needed, first)
-    assert re.search(r"Inconclusive (claims? [\d, and]+|none)", first), first
+    assert "`" not in first
+    for number in range(1, 8):
+        assert f"{number}. " in first
     assert "Smoke run: not a result" in (out / "results.md").read_text()
     # results.md: Table 6 beside the paper's numbers, the side metrics, each claim with its verdict.
     markdown = (out / "results.md").read_text()
-    for needed in ("(paper 1927)", "(paper 1969)", "| Human |", "## Collisions per episode", "preset `smoke`",
+    for needed in ("(paper 1927)", "(paper 1969)", "| Human |", "## Collisions per episode", "- smoke (Proposed",
                    "![Fig. 5: training speed](fig5_speed.png)"):
         assert needed in markdown, needed
+    assert markdown.split("\n## ")[1].startswith("What each host earns")  # results.md opens with the headline
     claim_rows = [line for line in markdown.splitlines() if line.startswith("| ") and "**" in line]
     assert [row.split(" | ")[0] for row in claim_rows] == [f"| {n}" for n in range(1, 8)]
     assert "**inconclusive**" in markdown  # one seed cannot decide a claim
