@@ -41,8 +41,8 @@ TABLE_FILES: dict[str, tuple[str, str]] = {
                          "config) and metrics.<key> (last values)"),
 }
 CONFIG_NOTE = f"{CONFIG_DIR}/<model>.yaml: each model's resolved config.yaml"
-MANIFEST_NOTE = (f"{MANIFEST}: format version, the source tracking URI and experiment, the git commits, "
-                 "creation time, runs left out, and each file's rows and column dtypes")
+MANIFEST_NOTE = (f"{MANIFEST}: format version, the source tracking URI (its file name only) and experiment, the "
+                 "git commits, creation time, runs left out, and each file's rows and column dtypes")
 
 
 class BundleError(RuntimeError):
@@ -68,6 +68,22 @@ def _previous_files(directory: Path) -> list[Path]:
         return []
     names = [t.get("file") for t in manifest.get("tables", {}).values()] + list(manifest.get("configs", {}).values())
     return [directory / n for n in names if isinstance(n, str) and "/.." not in f"/{n}"]
+
+
+def portable_uri(uri: str) -> str:
+    """The tracking URI without the writing machine's directories: `sqlite:////abs/dir/mlflow.db` becomes
+    `sqlite:///mlflow.db`, a file path its name; a server URI stays. Several, joined by '; ', one by one."""
+    parts = []
+    for part in str(uri).split("; "):
+        if part.startswith("sqlite:///"):
+            parts.append("sqlite:///" + Path(part.removeprefix("sqlite:///")).name)
+        elif part.startswith("file:"):
+            parts.append(Path(part.removeprefix("file:").lstrip("/") or ".").name)
+        elif "://" in part:
+            parts.append(part)
+        else:
+            parts.append(Path(part).name)
+    return "; ".join(parts)
 
 
 def write_bundle(data: StoreData, directory: Path | str) -> list[Path]:
@@ -96,7 +112,8 @@ def write_bundle(data: StoreData, directory: Path | str) -> list[Path]:
     manifest = {
         "format_version": FORMAT_VERSION,
         "created": dt.datetime.now(dt.UTC).isoformat(timespec="seconds"),
-        "tracking_uri": data.tracking_uri,
+        # A bundle travels: the store's directory on the machine that wrote it means nothing elsewhere.
+        "tracking_uri": portable_uri(data.tracking_uri),
         "experiment": data.experiment,
         "git_commits": data.git_commits,
         "git_dirty": data.git_dirty,

@@ -11,14 +11,22 @@ import pytest
 
 from analysis import tables
 from analysis.__main__ import main
-from analysis.bundle import FORMAT_VERSION, MANIFEST, TABLE_FILES, BundleError, load_bundle, write_bundle
+from analysis.bundle import (
+    FORMAT_VERSION,
+    MANIFEST,
+    TABLE_FILES,
+    BundleError,
+    load_bundle,
+    portable_uri,
+    write_bundle,
+)
 from analysis.load import StoreData, load_store
 from analysis.synthetic import SyntheticSpec, synthetic_frames, write_store
 
 
 def assert_same_data(a: StoreData, b: StoreData) -> None:
-    assert (a.tracking_uri, a.experiment, a.dropped, a.configs) == (b.tracking_uri, b.experiment, b.dropped,
-                                                                    b.configs)
+    assert (portable_uri(a.tracking_uri), a.experiment, a.dropped, a.configs) == (
+        portable_uri(b.tracking_uri), b.experiment, b.dropped, b.configs)
     for name in TABLE_FILES:
         pd.testing.assert_frame_equal(getattr(a, name), getattr(b, name), check_exact=True, obj=name)
     assert (a.git_commits, a.git_dirty) == (b.git_commits, b.git_dirty)
@@ -93,7 +101,7 @@ def test_bundle_of_a_real_store_equals_what_load_store_read(store: str, tmp_path
     assert back.runs["scenario"].dtype == "string" and back.runs["seed"].dtype == np.int64
     pd.testing.assert_frame_equal(tables.summary(data.evals), tables.summary(back.evals), check_exact=True)
     manifest = json.loads((tmp_path / MANIFEST).read_text())
-    assert manifest["tracking_uri"] == store and manifest["git_commits"] == ["abc1234"]
+    assert manifest["tracking_uri"] == portable_uri(store) and manifest["git_commits"] == ["abc1234"]
     assert manifest["tables"]["evals"]["rows"] == 3 * 5 * 2
 
 
@@ -149,3 +157,14 @@ def test_damaged_bundle_gets_one_line_naming_the_file(tmp_path: Path, damage: st
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if line.strip()]
     assert len(lines) == 1 and str(evals) in lines[0] and "Traceback" not in err, err
+
+
+def test_the_manifest_holds_no_path_of_the_machine_that_wrote_it(tmp_path: Path) -> None:
+    data = awkward_data()
+    data.tracking_uri = f"sqlite:///{tmp_path / 'deep' / 'mlflow.db'}; sqlite:///{tmp_path / 'variant.db'}"
+    write_bundle(data, tmp_path / "bundle")
+    text = (tmp_path / "bundle" / MANIFEST).read_text()
+    assert str(tmp_path) not in text
+    assert json.loads(text)["tracking_uri"] == "sqlite:///mlflow.db; sqlite:///variant.db"
+    assert portable_uri("http://tracking.example:5000") == "http://tracking.example:5000"
+    assert portable_uri("/abs/dir/mlruns") == "mlruns"
