@@ -46,7 +46,7 @@ def config_problem(overrides: list[str]) -> str | None:
     """Why the config of a single run with these overrides cannot run, in one line; None if it can.
 
     Hydra's own errors (an unknown group option or key, a malformed override) and the job's
-    schema (`hgm_repro.contracts.schema.validate`) are both checked, without importing torch.
+    schema (`hgm_repro.contracts.schema.check_config`) are both checked, without importing torch.
     """
     from hydra import initialize_config_dir
 
@@ -113,14 +113,14 @@ def _composed_problem(overrides: list[str]) -> str | None:
     `+key=value` added (Hydra accepts them; nothing reads them, so a typo would pass silently)."""
     from hydra import compose
 
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
 
     added = [o.split("=", 1)[0].lstrip("+") for o in overrides if o.startswith("+") and "=" in o]
     added = [key for key in added if not _is_group(key) and not key.startswith("hydra")]
     cfg = compose("config", overrides=overrides)
     if added:
         return _not_a_key(added[0], [o for o in overrides if o.split("=", 1)[0].lstrip("+") not in added])
-    validate(cfg)
+    check_config(cfg)
     return None
 
 

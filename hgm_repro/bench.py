@@ -193,10 +193,10 @@ def _compose(*overrides: str) -> Any:
     from hydra import compose, initialize_config_dir
 
     from .contracts.conf_dir import CONF_DIR
-    from .contracts.schema import validate
+    from .contracts.schema import check_config
 
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return validate(compose("config", overrides=list(overrides)))
+        return check_config(compose("config", overrides=list(overrides)))
 
 
 def _update_batch(job: Any, device: torch.device, gen: torch.Generator) -> Any:

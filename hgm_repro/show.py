@@ -165,7 +165,7 @@ def watch(args: dict[str, str]) -> Path:
 
     from hgm_repro.contracts.checkpoint import CheckpointMismatchError
     from hgm_repro.contracts.errors import ConfigError
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
     from hgm_repro.evaluation.media import record_gif
 
     scenario = _scenario_node(args["scenario"])  # the arguments first: nothing is fetched for a bad one
@@ -185,7 +185,7 @@ def watch(args: dict[str, str]) -> Path:
     out = Path(args["out"]) / (f"watch_{cfg.model.name}_seed{cfg.seed}_scenario{args['scenario']}"
                                f"_traffic{args['seed']}.{fmt}")
     try:
-        job = validate(cfg)
+        job = check_config(cfg)
     except ConfigError as error:
         raise WatchError(str(error)) from None
     try:
@@ -216,8 +216,8 @@ def _from_run(run_id: str, tracking_uri: str) -> tuple[Any, Path]:
 
     from omegaconf import OmegaConf
 
-    from hgm_repro.app.job import local_checkpoint
     from hgm_repro.app.store import Tracker, resolve_location
+    from hgm_repro.app.trainings import local_checkpoint
 
     location = resolve_location({"uri": tracking_uri or None}, Path.cwd())
     db = location.tracking_uri.removeprefix("sqlite:///")

@@ -30,7 +30,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from incidents import COLLISION_KINDS, DANGER_KINDS, drive_and_classify  # noqa: E402
 
 from baselines.drivers import IdmMobilDriver  # noqa: E402
-from hgm_repro.contracts.schema import JobConfig, validate  # noqa: E402
+from hgm_repro.contracts.schema import JobConfig, check_config  # noqa: E402
 from hgm_repro.models.builders import make_network  # noqa: E402
 from hgm_repro.observations import ObservationBuilder  # noqa: E402
 from hgm_repro.simulator import HOST, HighwaySimulator  # noqa: E402
@@ -41,7 +41,7 @@ CONF = Path(__file__).resolve().parents[1] / "conf"
 
 def compose_job(overrides: list[str]) -> JobConfig:
     with initialize_config_dir(config_dir=str(CONF), version_base="1.3"):
-        return validate(compose("config", overrides=overrides))
+        return check_config(compose("config", overrides=overrides))
 
 
 def make_sim(job: JobConfig, n_envs: int, seed: int) -> HighwaySimulator:

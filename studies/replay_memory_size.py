@@ -15,7 +15,7 @@ import torch
 from hydra import compose, initialize_config_dir
 
 from hgm_repro.contracts.conf_dir import CONF_DIR
-from hgm_repro.contracts.schema import validate
+from hgm_repro.contracts.schema import check_config
 from hgm_repro.envs import make_env
 from hgm_repro.learner.builders import make_replay_buffer
 from hgm_repro.learner.frame_replay import FrameReplay
@@ -26,7 +26,7 @@ NOT_TRANSITION = ("episode", "reward_terms", ("next", "episode"), ("next", "rewa
 
 def sizes(transitions: int, overrides: list[str]) -> dict[str, float]:
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        job = validate(compose("config", overrides=[*overrides, f"learner.buffer_size={transitions}"]))
+        job = check_config(compose("config", overrides=[*overrides, f"learner.buffer_size={transitions}"]))
     n_envs = job.learner.n_envs
     env = make_env(job, job.train_scenario, n_envs=n_envs, seed=0)
     flat_buffer = make_replay_buffer(job.learner, torch.device("cpu"))

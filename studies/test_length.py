@@ -32,13 +32,13 @@ def _job(model: str, seed: int, scenario: str, overrides: list[str], steps: int 
     from hydra import compose, initialize_config_dir
 
     from hgm_repro.contracts.conf_dir import CONF_DIR
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
 
     extra = [f"eval.test_steps={steps}"] if steps else []
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
         cfg = compose("config", overrides=[f"model={model}", f"seed={seed}", f"scenario='{scenario}'", *overrides,
                                            *extra])
-    return validate(cfg)
+    return check_config(cfg)
 
 
 def _checkpoint(runs: Path, job) -> Path | None:  # noqa: ANN001 - a JobConfig

@@ -1,5 +1,5 @@
-"""Where a run's code and person come from: the git commit, MLflow's source tags, and the words a
-launch's parent run carries (its tags and description)."""
+"""Where a run's code and person come from: the git commit, MLflow's source tags, and the tags of a
+job's runs and of a launch's parent run."""
 
 from __future__ import annotations
 
@@ -10,6 +10,7 @@ from functools import lru_cache
 from pathlib import Path
 
 from ..contracts.conf_dir import PACKAGE_ROOT
+from ..contracts.schema import JobConfig
 
 SOURCE_NAME = "python -m hgm_repro"
 # Tracked folders whose edits cannot change a run: documentation and the published results.
@@ -54,16 +55,16 @@ def _user() -> str:
         return str(os.getuid()) if hasattr(os, "getuid") else "unknown"
 
 
+def run_tags(job: JobConfig, key: str) -> dict[str, str]:
+    """Tags of a job's training and evaluation runs (each adds its `stage` and `scenario`)."""
+    commit, dirty = git_info()
+    return {"model": job.model.name, "seed": str(job.seed), "train_key": key, "git_commit": commit,
+            "git_dirty": dirty, "preset": job.experiment.name, "device": job.device}
+
+
 def launch_tags(kind: str, overrides: str) -> dict[str, str]:
     """Tags of a launch's parent run. No `stage` tag: analysis reads only train and eval runs."""
     commit, dirty = git_info()
     return {"launch": kind, "sweep": str(kind == "sweep").lower(), "overrides": overrides[:5000],
             "git_commit": commit, "git_dirty": dirty}
 
-
-def launch_description(kind: str, overrides: str, where: Path) -> str:
-    """A launch's description: the command, where it ran, and what sits under it."""
-    what, flag = ("A sweep", "-m ") if kind == "sweep" else ("A single job", "")
-    command = f"{SOURCE_NAME} {flag}{overrides}".strip()
-    return (f"{what}: `{command}`, launched in `{where}`. The trainings and evaluations it ran are the "
-            "runs nested under it.")

@@ -30,6 +30,7 @@ from omegaconf import DictConfig
 
 from ..contracts.config_tree import flatten as flatten_tree
 from ..contracts.interrupts import acquire_stoppably, protected
+from .descriptions import EXPERIMENT_DESCRIPTION
 from .provenance import source_tags
 
 log = logging.getLogger(__name__)
@@ -69,16 +70,6 @@ SHARED_VIEWS: dict[str, dict[str, Any]] = {
 }
 # What a launch's parent run summarises of its evaluations (means over seeds).
 SUMMARY_METRICS = ("episode_return", "avg_speed_kmh", "collisions")
-EXPERIMENT_DESCRIPTION = (
-    "Runs of **hgm_repro**, the reproduction of Bai et al.'s Hyper-Grid Matrix driving-decision paper.\n\n"
-    "Every top-level run is one launch of `python -m hgm_repro`: a sweep (`-m`) or a single job. Expand it "
-    "to see the runs it made: trainings (tag `stage=train`, in the training traffic) and evaluations "
-    "(`stage=eval`, one per model, test scenario and seed; each links to its training). A launch's "
-    "description ends with the means over seeds of its evaluations.\n\n"
-    "**Views** holds two views: *Evaluations grid* (every model, scenario and seed with its results) and "
-    "*Training curves* (for the chart view). "
-    "Figures, tables and the PDF report: `python -m analysis`."
-)
 # What this version of hgm_repro writes into an experiment (tags and names); another value on
 # an existing experiment means another version made it.
 STORE_FORMAT = "1"

@@ -1,9 +1,12 @@
 """The sweep callback: one MLflow parent run per sweep, created before any job starts, the sweep's
-shared values checked before anything is launched, and grouped training run ahead of the jobs."""
+shared values checked before anything is launched, and the plan of which seeds train together
+(`runtime.grouped`) handed to the jobs. It trains nothing: each job gets its network from the
+trainings service (`trainings.obtain_training`), which trains a planned group in its first job."""
 
 from __future__ import annotations
 
 import atexit
+import json
 import logging
 import os
 import re
@@ -15,12 +18,12 @@ from hydra.experimental.callback import Callback
 from omegaconf import DictConfig, OmegaConf, open_dict, read_write
 
 from ..contracts.errors import BAD_INPUT_EXIT, ConfigError
-from ..contracts.interrupts import JobInterrupted, hand_on, signals_raise
-from ..contracts.schema import validate
+from ..contracts.schema import check_config
 from ..learner.grouped import use_grouped
-from .job import train_grouped
-from .provenance import launch_description, launch_tags
+from .descriptions import launch_description
+from .provenance import launch_tags
 from .store import CURVES_VIEW, PARENT_RUN_ENV, Tracker, resolve_location
+from .trainings import TRAINING_GROUPS_ENV, plan_groups
 
 log = logging.getLogger(__name__)
 
@@ -60,7 +63,7 @@ def _sweep_jobs(config: DictConfig) -> list[Any]:
     for job_overrides in sweep_overrides(config):
         try:
             cfg = compose(config_name=str(config.hydra.job.config_name), overrides=job_overrides)
-            jobs.append(validate(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])))
+            jobs.append(check_config(OmegaConf.masked_copy(cfg, [k for k in cfg if k != "hydra"])))
         except (ConfigError, ValueError, KeyError) as error:  # Hydra's own errors are ValueErrors too
             log.debug("job %s left to itself: %s", job_overrides, error)
     return jobs
@@ -96,7 +99,7 @@ class SweepTracking(Callback):
         # before the store or any job is touched. Swept values are checked by each job.
         # Hydra turns a callback's exception into a warning, so stop with SystemExit instead.
         try:
-            validate(OmegaConf.masked_copy(config, [k for k in config if k != "hydra"]))
+            check_config(OmegaConf.masked_copy(config, [k for k in config if k != "hydra"]))
         except ConfigError as error:
             print(f"hgm_repro: {error}\nnothing was launched.", file=sys.stderr)
             raise SystemExit(BAD_INPUT_EXIT) from error
@@ -119,11 +122,11 @@ class SweepTracking(Callback):
         log.info("MLflow parent run %s (%s); evaluations: %s ; training curves: %s%s", self._parent,
                  tracker.location.tracking_uri, tracker.ui_url(), tracker.ui_url(CURVES_VIEW),
                  f" (serve the store first: {serve})" if serve else "")
-        self._train_grouped(config, tracker)
+        self._plan_training_groups(config)
 
-    def _train_grouped(self, config: DictConfig, tracker: Tracker) -> None:
-        """Before the jobs start: train the sweep's trainings in groups where `runtime.grouped` says
-        so (`hgm_repro.learner.grouped`); the jobs then find them FINISHED and only evaluate."""
+    def _plan_training_groups(self, config: DictConfig) -> None:
+        """Which seeds of the sweep train together, where `runtime.grouped` says so: handed to every job,
+        whose trainings service trains a group in the group's first job (the others wait and reuse)."""
         task = [str(o) for o in OmegaConf.to_container(config.hydra.overrides.task, resolve=False)]
         # Expanding the sweep costs a compose per job: only when a job may group.
         deciders = ("runtime.grouped", "runtime", "device", "experiment")
@@ -136,21 +139,15 @@ class SweepTracking(Callback):
         except (ValueError, ConfigError):
             return  # a bad value: the jobs report it
         jobs = [job for job in _sweep_jobs(config) if job.model.learned]
-        grouped = [job for job in jobs if use_grouped(job.runtime.grouped, job.device)]
+        plan = plan_groups(jobs)
         if jobs:
             log.info("runtime.grouped=%s on %s: %s", jobs[0].runtime.grouped, jobs[0].device,
-                     "training the seeds of each model together before the jobs" if grouped
+                     "training the seeds of each model together (a group's first job trains it)" if plan
                      else "each job trains its own model (solo)")
-        if not grouped:
-            return
-        try:
-            with signals_raise():
-                trained = train_grouped(grouped, tracker, self._parent)
-        except JobInterrupted as interrupted:
-            log.error("grouped training interrupted (%s); the same command resumes every member", interrupted)
-            self._close("KILLED")
-            hand_on(interrupted)
-        log.info("grouped training done: %d trainings; the jobs evaluate them", len(trained))
+        if plan:
+            text = json.dumps(plan, sort_keys=True)
+            os.environ[TRAINING_GROUPS_ENV] = text  # joblib's and submitit's workers inherit it
+            _hand_to_jobs(config, TRAINING_GROUPS_ENV, f"'{text}'")
 
     def on_multirun_end(self, config: DictConfig, **kwargs: Any) -> None:
         if self._tracker is not None and self._parent is not None:
@@ -175,4 +172,5 @@ class SweepTracking(Callback):
         if self._tracker is not None and self._parent is not None:
             self._tracker.end(self._parent, status)
             os.environ.pop(PARENT_RUN_ENV, None)
+            os.environ.pop(TRAINING_GROUPS_ENV, None)
             self._parent = None

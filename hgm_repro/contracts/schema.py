@@ -2,7 +2,7 @@
 
 Hydra already rejects unknown config-group options (`scenario=7`, `model=nope`) and unknown
 keys (struct mode). What it cannot know is that `learner.lr=-1` or `learner.batch_size=abc`
-is nonsense: command-line values arrive as whatever YAML makes of them. `validate(cfg)`
+is nonsense: command-line values arrive as whatever YAML makes of them. `check_config(cfg)`
 checks every value named here against its type and range, the observation node through the
 observation builders' `ObservationConfig`, the simulator and scenario nodes through the
 simulator's own validated configs (each rule lives once, with the part it protects), and raises
@@ -173,7 +173,7 @@ class ExperimentSchema:
 
 @dataclass(frozen=True)
 class JobConfig:
-    """What `validate` hands back, and what `train`, `evaluate` and `make_env` receive: the typed
+    """What `check_config` hands back, and what `train`, `evaluate` and `make_env` receive: the typed
     parts plus the simulator's and the observation builders' own validated configs.
 
     `model.network` / `model.driver` stay plain `_target_` mappings (Hydra instantiates them), and
@@ -350,7 +350,7 @@ def _check_tracking_uri(tracking: Any, errors: list[str]) -> None:
                       f"{', '.join(TRACKING_SCHEMES)} (e.g. {TRACKING_EXAMPLES})")
 
 
-def validate(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
+def check_config(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     """Check the whole job config; raise `ConfigError` listing every bad value."""
     root = dict(plain(cfg))
     errors: list[str] = []

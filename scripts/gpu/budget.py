@@ -127,10 +127,10 @@ def preset_learner(preset: str, device: str) -> Any:
     from hydra import compose, initialize_config_dir
 
     from hgm_repro.contracts.conf_dir import CONF_DIR
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
 
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return validate(compose("config", overrides=[f"experiment={preset}", f"device={device}"])).learner
+        return check_config(compose("config", overrides=[f"experiment={preset}", f"device={device}"])).learner
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -15,14 +15,15 @@ import pytest
 from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
-from hgm_repro.app.job import RUN_ID_FILE, run_job
+from hgm_repro.app.job import run_job
 from hgm_repro.app.provenance import git_info
 from hgm_repro.app.store import STORE_FORMAT_TAG, StoreError, Tracker, flatten, resolve_location, retry, tidy_number
+from hgm_repro.app.trainings import RUN_ID_FILE
 from hgm_repro.contracts.checkpoint import CHECKPOINT_FORMAT, save_checkpoint
 from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.errors import ConfigError
 from hgm_repro.contracts.interrupts import JobInterrupted
-from hgm_repro.contracts.schema import JobConfig, validate
+from hgm_repro.contracts.schema import JobConfig, check_config
 from hgm_repro.contracts.simulator_config import ScenarioConfig
 from hgm_repro.contracts.train_key import EVALUATION_VERSION, train_key
 
@@ -94,7 +95,7 @@ def test_train_key_ignores_test_scenario_tracking_and_device() -> None:
     assert base != train_key(make_cfg("scenario@train_scenario='5'"))
     # The typed config a job hands on carries the same identity as the tree it was validated from.
     for overrides in ((), ("model=min", "seed=3"), ("model=human",)):
-        assert train_key(validate(make_cfg(*overrides))) == train_key(make_cfg(*overrides))
+        assert train_key(check_config(make_cfg(*overrides))) == train_key(make_cfg(*overrides))
     assert len(base) == 12 and int(base, 16) >= 0
 
 
@@ -390,7 +391,7 @@ def test_eval_checkpoint_best_evaluates_best_pt(launch: Path) -> None:
 
 def test_eval_checkpoint_best_without_best_pt_fails_clearly(launch: Path) -> None:
     with pytest.raises(ConfigError, match="eval.checkpoint=best is not allowed with eval.val_every=0"):
-        validate(make_cfg("eval.checkpoint=best", "eval.val_every=0"))
+        check_config(make_cfg("eval.checkpoint=best", "eval.val_every=0"))
     # Validation asked for, but the training kept no best.pt (trained by older code, say).
     with pytest.raises(ConfigError, match=r"kept no best.pt .*eval.checkpoint=final"):
         run_job(make_cfg(VALIDATION_ON, "eval.checkpoint=best"), launch,
@@ -404,7 +405,7 @@ def test_eval_checkpoint_best_without_best_pt_fails_clearly(launch: Path) -> Non
                 train_fn=ValidatingLearner(evaluation_version=1), evaluate_fn=fake_evaluate)
     assert runs(launch, "eval") == []
     with pytest.raises(ConfigError, match="eval.checkpoint='last' is not allowed"):
-        validate(make_cfg("eval.checkpoint=last"))
+        check_config(make_cfg("eval.checkpoint=last"))
 
 
 def test_metric_values_are_python_floats_without_float32_noise(launch: Path) -> None:

@@ -98,7 +98,7 @@ def test_logged_model_gives_the_checkpoints_greedy_actions(job) -> None:
     from omegaconf import OmegaConf
 
     from hgm_repro.contracts.config_files import scenario_config
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
     from hgm_repro.evaluation.policies import trained_network
     from hgm_repro.observations import ObservationBuilder
     from hgm_repro.simulator import HighwaySimulator
@@ -106,7 +106,7 @@ def test_logged_model_gives_the_checkpoints_greedy_actions(job) -> None:
     mlflow.set_tracking_uri(f"sqlite:///{job.launch}/mlflow.db")
     logged = mlflow.pytorch.load_model(f"runs:/{job.train.info.run_id}/model")
     cfg = OmegaConf.load(job.client.download_artifacts(job.train.info.run_id, "config.yaml", str(job.launch)))
-    typed = validate(cfg)
+    typed = check_config(cfg)
     reference = trained_network(typed, job.checkpoint, torch.device("cpu"))
 
     sim = HighwaySimulator(typed.simulator, scenario_config("3", typed.simulator), n_envs=32, seed=5)

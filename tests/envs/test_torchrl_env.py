@@ -9,14 +9,14 @@ from tensordict import TensorDict
 from torchrl.envs.utils import check_env_specs
 
 from hgm_repro.contracts.conf_dir import CONF_DIR
-from hgm_repro.contracts.schema import JobConfig, validate
+from hgm_repro.contracts.schema import JobConfig, check_config
 from hgm_repro.envs import make_env
 from hgm_repro.simulator import N_ACTIONS
 
 
 def _cfg(*overrides: str) -> JobConfig:
     with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return validate(compose("config", overrides=["experiment=smoke", *overrides]))
+        return check_config(compose("config", overrides=["experiment=smoke", *overrides]))
 
 
 @pytest.mark.parametrize("model, keys", [

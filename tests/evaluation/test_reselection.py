@@ -22,7 +22,7 @@ from hgm_repro.contracts.checkpoint import (
 from hgm_repro.contracts.errors import ConfigError
 from hgm_repro.contracts.interrupts import JobInterrupted
 from hgm_repro.contracts.names import RESELECT_SEED_OFFSET, VAL_SEED_OFFSET
-from hgm_repro.contracts.schema import validate
+from hgm_repro.contracts.schema import check_config
 from hgm_repro.envs import make_env
 from hgm_repro.evaluation import reselection
 from hgm_repro.evaluation.episodes import run_episodes
@@ -138,9 +138,9 @@ def test_a_reselection_stopped_mid_way_leaves_no_choice_and_the_next_test_makes_
 def test_reselection_without_kept_passes_is_refused_before_any_work(trained, tmp_path: Path) -> None:
     with pytest.raises(ConfigError, match=r"eval.checkpoint=reselected is not allowed with eval.val_every=32 "
                                           r"and eval.keep_val_checkpoints=false"):
-        validate(compose_cfg(*RESELECT, "eval.keep_val_checkpoints=false"))
+        check_config(compose_cfg(*RESELECT, "eval.keep_val_checkpoints=false"))
     with pytest.raises(ConfigError, match="eval.checkpoint=reselected is not allowed with eval.val_every=0"):
-        validate(compose_cfg(*RESELECT, "eval.val_every=0"))
+        check_config(compose_cfg(*RESELECT, "eval.val_every=0"))
     # The training exists but kept no passes (trained without keep_val_checkpoints): the job says so and
     # opens no test run.
     launch, outcome = trained

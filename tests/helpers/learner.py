@@ -6,7 +6,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig
 
 from hgm_repro.contracts.conf_dir import CONF_DIR
-from hgm_repro.contracts.schema import JobConfig, validate
+from hgm_repro.contracts.schema import JobConfig, check_config
 
 # Tiny on top of the smoke preset, so that every test trains in a few seconds. The observation
 # sizes repeat smoke.yaml's: they make the test independent of how the root config orders presets.
@@ -27,7 +27,7 @@ def compose_cfg(*overrides: str) -> DictConfig:
 
 def compose_job(*overrides: str) -> JobConfig:
     """`compose_cfg(*overrides)`, validated: the typed config `train`, `evaluate` and `make_env` take."""
-    return validate(compose_cfg(*overrides))
+    return check_config(compose_cfg(*overrides))
 
 
 class Recorder:

@@ -109,24 +109,24 @@ def test_grouped_setting_changes_neither_train_key_nor_evaluation_key():
 
 def test_grouped_auto_means_cuda_only_and_bad_values_are_named():
     from hgm_repro.contracts.errors import ConfigError
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
     from hgm_repro.learner.grouped import use_grouped
     from tests.helpers.learner import compose_cfg
 
     assert use_grouped("auto", "cuda:0") and not use_grouped("auto", "cpu")
     assert use_grouped(True, "cpu") and not use_grouped(False, "cuda")
     with pytest.raises(ConfigError, match=r"runtime.grouped='maybe' is not allowed: expected one of 'auto'"):
-        validate(compose_cfg("runtime.grouped=maybe"))
+        check_config(compose_cfg("runtime.grouped=maybe"))
 
 
 def test_bf16_update_is_cuda_only_and_a_runtime_choice():
     from hgm_repro.contracts.errors import ConfigError
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
     from hgm_repro.contracts.train_key import evaluation_key, train_key
     from tests.helpers.learner import compose_cfg
 
     with pytest.raises(ConfigError, match=r"runtime.update_dtype=bfloat16 is not allowed with device='cpu'"):
-        validate(compose_cfg("runtime.update_dtype=bfloat16"))
+        check_config(compose_cfg("runtime.update_dtype=bfloat16"))
     # how the update runs, like the device: neither identity changes with it
     bf16 = compose_cfg("runtime.update_dtype=bfloat16", "device=cuda")
     assert train_key(bf16) == train_key(compose_cfg())

@@ -11,7 +11,7 @@ from torchrl.objectives import HardUpdate, SoftUpdate
 
 from hgm_repro.contracts.checkpoint import EMA_CHECKPOINT, load_checkpoint
 from hgm_repro.contracts.errors import ConfigError
-from hgm_repro.contracts.schema import validate
+from hgm_repro.contracts.schema import check_config
 from hgm_repro.contracts.train_key import train_key
 from hgm_repro.learner import train
 from hgm_repro.learner.builders import make_loss, make_optimizer, make_target_updater
@@ -49,7 +49,7 @@ def test_a_floor_above_eps_end_is_refused():
     with pytest.raises(ValueError, match="eps_floor=0.2 is not allowed above eps_end=0.1"):
         EpsilonGreedy(1.0, 0.1, 100, eps_floor=0.2, floor_steps=10)
     with pytest.raises(ConfigError, match="learner.eps_floor=0.5 is not allowed above learner.eps_end"):
-        validate(compose_cfg("learner.eps_floor=0.5", "learner.eps_floor_steps=100"))
+        check_config(compose_cfg("learner.eps_floor=0.5", "learner.eps_floor_steps=100"))
 
 
 @pytest.mark.parametrize("share", [0.0, 0.1, 0.4, 1.0])
@@ -103,7 +103,7 @@ def test_every_learner_value_is_part_of_the_train_key_and_has_one_default():
     with open_dict(cfg):
         del cfg.learner["target_tau"]
     with pytest.raises(ConfigError, match="learner.target_tau is missing: expected a number"):
-        validate(cfg)
+        check_config(cfg)
 
 
 def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):
@@ -120,13 +120,13 @@ def test_ema_training_keeps_ema_pt_and_validates_the_average(tmp_path):
     assert log.steps("val_ema/episode_return") == [64, 128] == log.steps("val/episode_return")
     assert last["epsilon"] == pytest.approx(0.01)
     with pytest.raises(ConfigError, match="eval.checkpoint=ema is not allowed with learner.ema_decay=0"):
-        validate(compose_cfg("eval.checkpoint=ema"))
+        check_config(compose_cfg("eval.checkpoint=ema"))
 
 
 def test_hgm_options_are_checked_and_change_the_train_key():
     assert train_key(compose_job("model=proposed", "observation.hgm_host_cell=own_range")) != \
         train_key(compose_job("model=proposed"))
     with pytest.raises(ConfigError, match="hgm_host_cell='corner' is not allowed; allowed: \\['paper', 'own_range'\\]"):
-        validate(compose_cfg("observation.hgm_host_cell=corner"))
+        check_config(compose_cfg("observation.hgm_host_cell=corner"))
     with pytest.raises(ConfigError, match="observation.hgm_ahead=-5 is not allowed"):
-        validate(compose_cfg("observation.hgm_ahead=-5"))
+        check_config(compose_cfg("observation.hgm_ahead=-5"))

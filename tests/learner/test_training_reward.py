@@ -40,11 +40,11 @@ def test_batched_time_windows_keep_their_shape():
 @pytest.mark.parametrize("bad", ["learner.collision_weight=0", "learner.collision_weight=-2"])
 def test_non_positive_collision_weight_is_refused(bad):
     from hgm_repro.contracts.errors import ConfigError
-    from hgm_repro.contracts.schema import validate
+    from hgm_repro.contracts.schema import check_config
     from tests.helpers.learner import compose_cfg
 
     with pytest.raises(ConfigError, match="collision_weight"):
-        validate(compose_cfg(bad))
+        check_config(compose_cfg(bad))
 
 
 @pytest.mark.parametrize("grouped", [False, True], ids=["solo", "grouped"])

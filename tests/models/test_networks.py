@@ -12,7 +12,7 @@ from torch import nn
 from baselines.coordinate_net import CoordinateDuelingQNet
 from baselines.min_net import MinDuelingQNet
 from hgm_repro.contracts.conf_dir import CONF_DIR
-from hgm_repro.contracts.schema import validate
+from hgm_repro.contracts.schema import check_config
 from hgm_repro.models.builders import make_network
 from hgm_repro.models.networks import (
     DuelingHead,
@@ -127,7 +127,8 @@ def test_coordinate_net_reads_camera_and_v2x_vector():
                                          ("coordinate", ["camera", "coordinates"])])
 def test_every_model_config_builds_its_network(model, keys):
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-        job = validate(compose("config", overrides=[f"model={model}", "observation.height=36", "observation.width=36"]))
+        job = check_config(compose("config", overrides=[f"model={model}", "observation.height=36",
+                                                        "observation.width=36"]))
     net = make_network(job)
     assert net.in_keys == keys
     assert set(keys) <= {k for k, v in job.model.streams.items() if v not in ("none", False)} | {"coordinates"}

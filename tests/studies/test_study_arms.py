@@ -10,7 +10,7 @@ from hydra import compose, initialize_config_dir
 from omegaconf import DictConfig, OmegaConf
 
 from hgm_repro.contracts.conf_dir import CONF_DIR
-from hgm_repro.contracts.schema import validate
+from hgm_repro.contracts.schema import check_config
 from tests.helpers import REPO_ROOT
 
 sys.path.insert(0, str(REPO_ROOT / "studies"))
@@ -22,7 +22,7 @@ def test_every_arm_composes_and_validates_on_the_quick_preset(arm: str) -> None:
     overrides = ["seed=100", "scenario=train", "experiment=quick", "eval.checkpoint=final", *ARMS[arm]]
     with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
         cfg = compose("config", overrides=overrides)
-    validate(cfg)
+    check_config(cfg)
     for override in ARMS[arm]:  # each override reached the config, with the value the arm states
         key, value = override.split("=", 1)
         node = OmegaConf.select(cfg, key)
@@ -40,7 +40,7 @@ def test_the_reselected_test_trains_exactly_as_the_arm_and_tests_the_reselected_
     def job(extra: list[str]):
         overrides = _command("r20_enriched_160k", 100, "sqlite:///x.db", extra)[3:]  # after python -m hgm_repro
         with initialize_config_dir(config_dir=str(CONF_DIR), version_base="1.3"):
-            return validate(compose("config", overrides=overrides))
+            return check_config(compose("config", overrides=overrides))
 
     plain, keeping, reselected = job([]), job(KEEP_PASSES), job(RESELECTED)
     assert train_key(plain) == train_key(keeping) == train_key(reselected)  # one training, as section 11's
