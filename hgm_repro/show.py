@@ -219,7 +219,7 @@ def _from_run(run_id: str, tracking_uri: str) -> tuple[Any, Path]:
     from hgm_repro.app.store import Tracker, resolve_location
     from hgm_repro.app.trainings import local_checkpoint
 
-    location = resolve_location({"uri": tracking_uri or None}, Path.cwd())
+    location = resolve_location({"uri": tracking_uri or None}, Path.cwd(), create=False)
     db = location.tracking_uri.removeprefix("sqlite:///")
     if location.tracking_uri.startswith("sqlite:///") and not Path(db).is_file():
         raise WatchError(f"no MLflow store at {db}: start from the directory the jobs ran in, or give tracking_uri=")

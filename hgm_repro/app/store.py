@@ -99,8 +99,10 @@ class StoreLocation:
         return self.tracking_uri.startswith("sqlite:") or self.tracking_uri.startswith("file:")
 
 
-def resolve_location(tracking: Mapping[str, Any] | DictConfig, launch_dir: Path) -> StoreLocation:
-    """Make `tracking.*` absolute against the directory the command was started from."""
+def resolve_location(tracking: Mapping[str, Any] | DictConfig, launch_dir: Path, create: bool = True) -> StoreLocation:
+    """Make `tracking.*` absolute against the directory the command was started from. A SQLite store named by
+    `tracking.uri` is kept like the default one: artifacts beside it, and its directory made (with `create`;
+    a reader passes False) and logged when missing."""
     launch_dir = Path(launch_dir).resolve()
 
     def under_launch(value: str | None, default: str) -> Path:
@@ -108,6 +110,14 @@ def resolve_location(tracking: Mapping[str, Any] | DictConfig, launch_dir: Path)
 
     uri = tracking.get("uri")
     checkpoint_root = under_launch(tracking.get("checkpoint_dir"), "checkpoints")
+    if uri and str(uri).startswith("sqlite:///"):
+        db = under_launch(str(uri).removeprefix("sqlite:///"), "mlflow.db")
+        if create and not db.parent.is_dir():
+            log.warning("tracking.uri=%s: creating the missing directory %s for the store", uri, db.parent)
+            db.parent.mkdir(parents=True, exist_ok=True)
+        artifact_dir = tracking.get("artifact_dir")
+        artifacts = under_launch(artifact_dir, "") if artifact_dir else db.parent / "mlartifacts"
+        return StoreLocation(f"sqlite:///{db}", artifacts.as_uri(), checkpoint_root, db.with_name(f"{db.name}.lock"))
     if uri:
         return StoreLocation(str(uri), None, checkpoint_root, checkpoint_root.parent / ".mlflow_store.lock")
     db = launch_dir / "mlflow.db"
