@@ -374,6 +374,90 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
     return row
 
 
+TRAINING_PATHS = {
+    # What one training ran before the CPU's second core and bf16 were used: float32, one thread,
+    # collect then update.
+    "baseline": ("runtime.update_dtype=float32", "runtime.overlap=false", "runtime.torch_threads=1"),
+    "default": (),  # the preset as the main job runs it (runtime.update_dtype and runtime.overlap: auto)
+}
+
+
+def bench_training(device: torch.device, path: str, total_steps: int, warmup_steps: int = 1000,
+                   log_every: int = 1000) -> dict[str, Any]:
+    """One quick-preset training end to end by `path` (`TRAINING_PATHS`): env steps and updates per
+    second over the loop after its first log point (the warm-up's random steps and the first
+    updates' one-off costs excluded), and what the path resolved to."""
+    import tempfile
+    from pathlib import Path
+
+    from .contracts.runtime_choice import update_dtype, use_overlap
+    from .learner import train
+
+    if path not in TRAINING_PATHS:
+        raise ValueError(f"path={path!r} is not one of {sorted(TRAINING_PATHS)}")
+    job = _compose("experiment=quick", f"device={device}", f"learner.total_steps={total_steps}",
+                   f"learner.warmup_steps={warmup_steps}", "eval.val_every=0", "eval.checkpoint=final",
+                   f"logging.checkpoint_every={total_steps * 10}", f"logging.log_every={log_every}",
+                   *TRAINING_PATHS[path])
+    points: list[tuple[float, int, float]] = []  # (time, env steps, updates) at each log point
+
+    def log(metrics: dict[str, float], step: int) -> None:
+        points.append((time.perf_counter(), step, metrics["train/updates"]))
+
+    threads = torch.get_num_threads()
+    with tempfile.TemporaryDirectory() as tmp:
+        train(job, Path(tmp), log)
+    torch.set_num_threads(threads)
+    # From the first log point after the warm-up to the last: the loop with its updates.
+    start = next(k for k, point in enumerate(points) if point[1] > warmup_steps)
+    (t0, s0, u0), (t1, s1, u1) = points[start], points[-1]
+    return dict(what="training", path=path, device=str(device), n_envs=job.learner.n_envs, camera="front",
+                hgm="paper", preset="quick", image=f"{job.observation.height}x{job.observation.width}",
+                update_dtype=str(update_dtype(job.runtime.update_dtype, device)).removeprefix("torch."),
+                overlap=use_overlap(job.runtime.overlap, device), env_steps=s1 - s0,
+                env_steps_per_s=round((s1 - s0) / (t1 - t0), 1), updates_per_s=round((u1 - u0) / (t1 - t0), 1),
+                torch_threads=job.runtime.torch_threads)
+
+
+PRECISIONS = ("float32", "float32+channels_last", "bf16", "bf16+channels_last")
+
+
+def bench_precision(device: torch.device, preset: str, seconds: float, rounds: int = 3) -> list[dict[str, Any]]:
+    """Updates per second of one member's update (`preset`'s network and batch size) in float32 and
+    bf16 autocast, each with and without channels_last weights and inputs; the variants take turns
+    for `rounds` rounds so that a busy machine slows them alike, and each line gives its median round."""
+    job = _compose(f"experiment={preset}", f"device={device}", "runtime.update_dtype=float32")
+    batch = _update_batch(job, device, torch.Generator(device=device).manual_seed(0))
+    steps = {}
+    for precision in PRECISIONS:
+        update, net = _member_update(job, device)
+        if precision.endswith("channels_last"):
+            net.to(memory_format=torch.channels_last)
+        steps[precision] = update
+    rates: dict[str, list[float]] = {p: [] for p in PRECISIONS}
+    for _ in range(rounds):
+        for precision, update in steps.items():
+            bf16 = precision.startswith("bf16")
+            channels_last = precision.endswith("channels_last")
+
+            def one_update(update=update, bf16=bf16, channels_last=channels_last) -> None:
+                sample = batch.clone()
+                if channels_last:
+                    sample = sample.apply(lambda x: x.contiguous(memory_format=torch.channels_last) if x.dim() == 4
+                                          else x)
+                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
+                    update(sample)
+
+            calls, elapsed = _timed(one_update, device, seconds / rounds)
+            rates[precision].append(calls / elapsed)
+    return [dict(what="update precision", device=str(device), n_envs=0, camera="front", hgm="paper", preset=preset,
+                 precision=precision, batch_size=job.learner.batch_size,
+                 image=f"{job.observation.height}x{job.observation.width}x{job.observation.frame_stack}",
+                 env_steps_per_s=None, updates_per_s=round(sorted(r)[len(r) // 2], 1),
+                 vs_float32=round(sorted(r)[len(r) // 2] / sorted(rates["float32"])[len(r) // 2], 2))
+            for precision, r in rates.items()]
+
+
 GROUPED_UPDATE_MODES = ("eager", "bf16", "cuda_graph", "compile")
 
 
@@ -440,8 +524,9 @@ def bench_highway_env(seconds: float, observation: str = "Kinematics") -> dict[s
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m hgm_repro.bench", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--only", choices=[*PARTS, "rate", "grouped_update"], action="append",
-                        help="measure only these parts (repeatable); default: all but rate and grouped_update")
+    parser.add_argument("--only", choices=[*PARTS, "rate", "grouped_update", "training", "precision"],
+                        action="append", help="measure only these parts (repeatable); default: all but rate, "
+                        "grouped_update, training and precision")
     parser.add_argument("--n-envs", default="1,64,256,1024,4096",
                         help="comma-separated batch sizes for the simulator on CPU (default: %(default)s)")
     parser.add_argument("--cuda-n-envs", default="1024,8192,32768",
@@ -457,6 +542,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seconds", type=float, default=3.0, help="time per measurement (default: %(default)s)")
     parser.add_argument("--train-steps", type=int, default=2048,
                         help="env steps of the end-to-end training measurement (x8 on CUDA) (%(default)s)")
+    parser.add_argument("--training-steps", type=int, default=6000,
+                        help="env steps of each training line (1,000 of them warm-up) (default: %(default)s)")
     parser.add_argument("--threads", type=int, default=None, help="torch CPU threads (default: torch's choice)")
     parser.add_argument("--members", default="1,5",
                         help="training members of the grouped-training lines (default: %(default)s; 15 on a GPU "
@@ -546,6 +633,17 @@ def main(argv: list[str] | None = None) -> int:
                     print(f"learner training, {members} members {path} on {device}...", file=sys.stderr)
                     row = bench_grouped_training(device, steps, members, path, threads=cores)
                     row["vs_one_member_one_thread"] = round(row["env_steps_per_s"] / alone["env_steps_per_s"], 3)
+                    emit(row)
+        if "training" in parts:
+            # One run, the two paths in turn, twice: a busy machine slows both alike.
+            for _ in range(2):
+                for path in TRAINING_PATHS:
+                    print(f"training, quick preset, {path} path, on {device}...", file=sys.stderr)
+                    emit(bench_training(device, path, total_steps=args.training_steps))
+        if "precision" in parts:
+            for preset in ("paper", "quick"):
+                print(f"update precision, {preset} preset's network, on {device}...", file=sys.stderr)
+                for row in bench_precision(device, preset, 4 * args.seconds):
                     emit(row)
         if "rate" in parts:
             # Warm-up of one batch per member: the line measures the loop with its updates, as most of a

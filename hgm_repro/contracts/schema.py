@@ -25,6 +25,7 @@ from .config_files import scenario_config, simulator_config
 from .config_tree import plain
 from .errors import ConfigError
 from .observation_config import ObservationConfig
+from .runtime_choice import check_update_dtype
 from .simulator_config import ScenarioConfig, SimulatorConfig
 
 
@@ -106,7 +107,8 @@ class RuntimeSchema:
     torch_threads: int = field(metadata=ge(0))
     compile: bool
     cuda_graph: bool
-    update_dtype: Literal["float32", "bfloat16"]
+    update_dtype: Literal["auto", "float32", "bfloat16"]
+    overlap: Literal["auto", True, False]
     grouped: Literal["auto", True, False]
     replay_frames: bool
     checkpoint_buffer_max_mb: float = field(metadata=ge(0))
@@ -384,10 +386,11 @@ def check_config(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     if isinstance(learner, LearnerSchema) and learner.ema_decay >= 1.0:
         errors.append(f"learner.ema_decay={learner.ema_decay} is not allowed: must be in [0, 1) (0 = off)")
     runtime = parts["runtime"]
-    if isinstance(runtime, RuntimeSchema) and runtime.update_dtype == "bfloat16" \
-            and not str(root.get("device", "")).startswith("cuda"):
-        errors.append(f"runtime.update_dtype=bfloat16 is not allowed with device={root.get('device')!r}: bf16 "
-                      "autocast of the update is for CUDA only (use runtime.update_dtype=float32 here)")
+    if isinstance(runtime, RuntimeSchema):
+        try:
+            check_update_dtype(runtime.update_dtype, str(root.get("device", "cpu")))
+        except (ValueError, RuntimeError) as e:
+            errors.append(str(e))
     _check_eval(parts["eval"], parts["model"], parts["learner"], errors)
     _check_tracking(parts["tracking"], errors)
 

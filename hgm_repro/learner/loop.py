@@ -35,10 +35,14 @@ from torchrl.collectors import Collector
 from tqdm import tqdm
 
 from ..contracts.interrupts import JobInterrupted, deferred, pending, raise_if_pending
+from ..contracts.runtime_choice import use_overlap
 from ..contracts.schema import JobConfig
 from ..envs import make_env
+from ..models.builders import make_actor
+from .builders import make_policy
 from .grouped import check_group
 from .member import Log, Member, NonFiniteLossError, set_rng_state
+from .overlap import ActingCopies, Prefetcher
 
 logger = logging.getLogger(__name__)
 
@@ -133,7 +137,13 @@ def _train_together(members: list[Member]) -> list[Path]:
     # is exactly `warmup_steps` steps of random actions; on a resume without a stored memory the
     # restored epsilon-greedy policy refills it first (those steps count as env steps).
     learn_from = min(warmup_steps, L.buffer_size)
-    policy = members[0].policy if count == 1 else MemberPolicies([m.policy for m in members], n_envs)
+    # runtime.overlap: the next batch is collected in a second thread while this one trains
+    # (overlap.py), by acting copies of the networks that the updates never write.
+    overlap = use_overlap(job0.runtime.overlap, device)
+    acting = ActingCopies([m.net for m in members]) if overlap else None
+    policies = [m.policy for m in members] if acting is None else \
+        [make_policy(make_actor(net).to(device), m.exploration) for net, m in zip(acting.acting, members, strict=True)]
+    policy = policies[0] if count == 1 else MemberPolicies(policies, n_envs)
     collector = Collector(
         env, policy, frames_per_batch=count * n_envs, total_frames=(total_steps - steps_done) * count,
         init_random_frames=max(0, warmup_steps - steps_done) * count, device=device, storing_device=device,
@@ -149,7 +159,7 @@ def _train_together(members: list[Member]) -> list[Path]:
         for member in members:
             member.save_last(finished=steps_done >= total_steps, **progress_state())
         bar.close()
-        collector.shutdown()
+        close_collection()
         if interrupted is not None:
             raise interrupted
         raise_if_pending()
@@ -161,13 +171,23 @@ def _train_together(members: list[Member]) -> list[Path]:
         logger.info("grouped training: %d members of '%s' (seeds %s) in one process, %d envs each",
                     count, job0.model.name, seeds, n_envs)
     last_log_steps, last_log_time = steps_done, time.perf_counter()
+    batches = iter(collector)
+    prefetch = Prefetcher(batches) if overlap else None
+
+    def close_collection() -> None:
+        if prefetch is not None:
+            prefetch.close()
+        collector.shutdown()
 
     # --- the loop: one decision in every env, store it, learn, log, checkpoint ----------------------
-    for batch in collector:
-        batch: TensorDictBase = batch.reshape(count * n_envs, -1)  # [envs, time]
+    collected = next(batches, None)
+    while collected is not None:
+        batch: TensorDictBase = collected.reshape(count * n_envs, -1)  # [envs, time]
         steps_before, steps_done = steps_done, steps_done + batch.numel() // count
         for member in members:
             member.observe(batch[member.rows])
+        if prefetch is not None:
+            prefetch.start()  # the next batch, collected while this one trains
 
         if len(members[0].memory) >= learn_from:
             update_credit += batch.numel() / count / L.update_every
@@ -179,14 +199,18 @@ def _train_together(members: list[Member]) -> list[Path]:
                 losses = member.learn(updates)
                 if losses is not None and not torch.isfinite(losses).all():
                     bar.close()
-                    collector.shutdown()
+                    close_collection()
                     raise NonFiniteLossError(
                         f"training loss became {losses.tolist()} at env step {steps_done} (update "
                         f"{updates_done + updates}) for model '{member.job.model.name}' seed {member.job.seed}; "
                         f"stopped. The last good checkpoint is {member.last_path} (if one was written). "
                         f"Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
             updates_done += updates
-            collector.update_policy_weights_()
+            if prefetch is None:
+                collector.update_policy_weights_()
+        if prefetch is not None:
+            collected = prefetch.result()
+            acting.refresh()  # the collector is idle now: the next batch acts with these weights
 
         bar.update(steps_done - steps_before)
         if bar.n % (50 * n_envs) < n_envs:
@@ -229,9 +253,11 @@ def _train_together(members: list[Member]) -> list[Path]:
 
         if pending() and steps_done < total_steps:
             stop()
+        if prefetch is None:
+            collected = next(batches, None)
 
     bar.close()
-    collector.shutdown()
+    close_collection()
     if steps_done < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
         warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
     return [member.save_final(**progress_state()) for member in members]

@@ -88,8 +88,8 @@ def buffer_megabytes(buffer) -> float:
 def update_ema(ema_net: torch.nn.Module, net: torch.nn.Module, decay: float) -> None:
     """One step of the exponential moving average of the online weights (buffers are copied)."""
     with torch.no_grad():
-        for averaged, current in zip(ema_net.parameters(), net.parameters(), strict=True):
-            averaged.lerp_(current, 1.0 - decay)
+        # One call over all tensors: on a CPU the same lerp_ per tensor, without Python's loop.
+        torch._foreach_lerp_(list(ema_net.parameters()), list(net.parameters()), 1.0 - decay)
         for averaged, current in zip(ema_net.buffers(), net.buffers(), strict=True):
             averaged.copy_(current)
 

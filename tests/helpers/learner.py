@@ -13,7 +13,10 @@ from hgm_repro.contracts.schema import JobConfig, check_config
 TINY = ["experiment=smoke", "observation.height=36", "observation.width=36", "observation.frame_stack=2",
         "learner.n_envs=4", "learner.batch_size=8", "learner.warmup_steps=32",
         "learner.total_steps=128", "learner.eps_steps=128", "logging.checkpoint_every=64", "logging.log_every=32",
-        "learner.target_update_steps=32", "eval.test_steps=48", "eval.test_envs=4", "runtime.torch_threads=1"]
+        "learner.target_update_steps=32", "eval.test_steps=48", "eval.test_envs=4", "runtime.torch_threads=1",
+        # The path every pinned number was recorded on: float32, collect then update (the overlapped
+        # loop has tests of its own).
+        "runtime.update_dtype=float32", "runtime.overlap=false"]
 
 
 def compose_cfg(*overrides: str) -> DictConfig:

@@ -3,6 +3,8 @@ Polyak target updates and the moving average of the weights. Each default trains
 
 from __future__ import annotations
 
+import copy
+
 import pytest
 import torch
 from omegaconf import open_dict
@@ -14,8 +16,9 @@ from hgm_repro.contracts.errors import ConfigError
 from hgm_repro.contracts.schema import check_config
 from hgm_repro.contracts.train_key import train_key
 from hgm_repro.learner import train
-from hgm_repro.learner.builders import make_loss, make_optimizer, make_target_updater
+from hgm_repro.learner.builders import PolyakUpdate, make_loss, make_optimizer, make_target_updater
 from hgm_repro.learner.exploration import LANE_CHANGES, EpsilonGreedy, random_action_probs
+from hgm_repro.learner.member import update_ema
 from hgm_repro.models.builders import make_actor, make_network
 from hgm_repro.simulator import N_ACTIONS
 from tests.helpers.learner import Recorder, compose_cfg, compose_job
@@ -130,3 +133,39 @@ def test_hgm_options_are_checked_and_change_the_train_key():
         check_config(compose_cfg("observation.hgm_host_cell=corner"))
     with pytest.raises(ConfigError, match="observation.hgm_ahead=-5 is not allowed"):
         check_config(compose_cfg("observation.hgm_ahead=-5"))
+
+
+def test_polyak_targets_and_the_moving_average_match_the_per_tensor_forms_to_the_bit():
+    # PolyakUpdate and update_ema gather their tensors once and lerp them in one call; they must
+    # compute exactly what TorchRL's SoftUpdate and a per-tensor lerp_ compute, also after the
+    # online weights were loaded from a checkpoint (in place) between steps.
+    job = compose_job("model=proposed", "learner.target_tau=0.01")
+    torch.manual_seed(0)
+    net = make_network(job)
+    twin = copy.deepcopy(net)
+    fast_loss, slow_loss = (make_loss(job.learner, make_actor(n)) for n in (net, twin))
+    fast, slow = make_target_updater(job.learner, fast_loss), SoftUpdate(slow_loss, tau=0.01)
+    assert isinstance(fast, PolyakUpdate)
+    ema_fast, ema_slow = copy.deepcopy(net), copy.deepcopy(net)
+    for step in range(5):
+        with torch.no_grad():
+            for a, b in zip(net.parameters(), twin.parameters(), strict=True):
+                noise = torch.randn_like(a)
+                a.add_(noise)
+                b.add_(noise)
+        if step == 2:
+            state = {k: v + 0.5 for k, v in net.state_dict().items()}
+            net.load_state_dict(state)
+            twin.load_state_dict(state)
+        fast.step()
+        slow.step()
+        update_ema(ema_fast, net, 0.9)
+        with torch.no_grad():
+            for averaged, current in zip(ema_slow.parameters(), net.parameters(), strict=True):
+                averaged.lerp_(current, 1.0 - 0.9)
+    fast_targets = fast_loss.target_value_network_params.flatten_keys()
+    slow_targets = slow_loss.target_value_network_params.flatten_keys()
+    assert all(torch.equal(fast_targets[k], slow_targets[k]) for k in fast_targets.keys())
+    assert not torch.equal(fast_targets[next(iter(fast_targets.keys()))],
+                           fast_loss.value_network_params.flatten_keys()[next(iter(fast_targets.keys()))])
+    assert all(torch.equal(a, b) for a, b in zip(ema_fast.parameters(), ema_slow.parameters(), strict=True))

@@ -67,7 +67,7 @@ def test_a_group_trains_with_every_learner_option(tmp_path: Path):
     assert not torch.equal(networks[0][first], networks[1][first])  # each member its own weights
 
 
-@pytest.mark.parametrize("pattern", [r"optim\.Adam\(", r"for batch in collector"])
+@pytest.mark.parametrize("pattern", [r"optim\.Adam\(", r"\bCollector\("])
 def test_one_optimiser_and_one_loop_in_the_package(pattern: str):
     found = [f"{p.relative_to(PACKAGE)}" for p in PACKAGE.rglob("*.py") if re.search(pattern, p.read_text())]
     assert len(found) == 1, found
