@@ -68,7 +68,7 @@ def _environment(runs: pd.DataFrame) -> tuple[list[tuple[str, str]], pd.DataFram
 PER_RUN_KEYS = ("scenario", "seed")
 CONFIGS_NOTE = ("Each model's resolved config (of one of its evaluation runs) against the defaults that conf/ of "
                 "this checkout composes for that model (python -m hgm_repro model=<name>); scenario and seed vary "
-                "from run to run and are left out.")
+                "from run to run and are left out; (absent) marks a setting the runs predate.")
 
 
 def _default_configs(models: list[str]) -> dict[str, dict[str, Any]]:

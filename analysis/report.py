@@ -275,7 +275,7 @@ def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
         pdf.ln(2)
     if inp.headline is not None and not inp.headline.empty:
         w.heading("What each host earns and how often it crashes", keep_mm=60)
-        w.table(headline_rows(inp.headline), col_widths=[1.45, 0.45, 1.3, 1.3, 1.3, 1.3], size=7.5)
+        w.table(headline_rows(inp.headline), col_widths=[1.4, 0.55, 1.3, 1.3, 1.3, 1.3], size=7.5)
         pdf.set_y(pdf.get_y() - 2)
         w.para(HEADLINE_NOTE, size=7.5, italic=True)
     w.heading("The paper's claims", keep_mm=40)

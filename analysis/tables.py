@@ -9,7 +9,15 @@ import pandas as pd
 
 from analysis.labels import fmt, model_label, ordered_models, ordered_scenarios
 from analysis.load import EVAL_METRICS
-from analysis.stats import NO_DATA, iqm, mean_ci, probability_of_improvement, stratified_mean_ci, test_noise_ci
+from analysis.stats import (
+    NO_DATA,
+    Estimate,
+    iqm,
+    mean_ci,
+    probability_of_improvement,
+    stratified_mean_ci,
+    test_noise_ci,
+)
 
 # The paper's Table 6 (test score per scenario; the paper does not name the unit).
 PAPER_TABLE6 = pd.DataFrame(
@@ -31,6 +39,17 @@ def per_scenario(evals: pd.DataFrame, model: str, metric: str,
     return out
 
 
+# Metrics that cannot be negative: a t interval that reaches below 0 is cut there (the true mean lies above
+# 0, so cutting cannot lose coverage; it only stops a table printing an impossible value).
+NON_NEGATIVE = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m")
+
+
+def _floored(est: Estimate, metric: str) -> Estimate:
+    if metric in NON_NEGATIVE and est.has_ci and est.low < 0:
+        return Estimate(est.point, 0.0, max(est.high, 0.0), est.n)
+    return est
+
+
 def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.DataFrame:
     """Long table: model, scenario, metric, n_seeds, mean, low, high (95 % t interval over seeds)."""
     rows = []
@@ -38,7 +57,7 @@ def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.
         for metric in metrics:
             if metric not in group:
                 continue
-            est = mean_ci(group[metric].to_numpy(dtype=float))
+            est = _floored(mean_ci(group[metric].to_numpy(dtype=float)), metric)
             rows.append({"model": model, "scenario": str(scenario), "metric": metric, "n_seeds": est.n,
                          "mean": est.point, "low": est.low, "high": est.high})
     return pd.DataFrame(rows, columns=["model", "scenario", "metric", "n_seeds", "mean", "low", "high"])
@@ -60,8 +79,8 @@ def headline(evals: pd.DataFrame, scenarios: list[str], scenario: str = HEADLINE
         row: dict[str, object] = {"model": model}
         for metric in metrics:
             by_scenario = per_scenario(evals, model, metric, scenarios)
-            for where, est in (("scenario", mean_ci(by_scenario.get(scenario, []))),
-                               ("mean", stratified_mean_ci(by_scenario))):
+            for where, est in (("scenario", _floored(mean_ci(by_scenario.get(scenario, [])), metric)),
+                               ("mean", _floored(stratified_mean_ci(by_scenario), metric))):
                 for part in ("point", "low", "high", "n"):
                     row[f"{metric}/{where}/{part}"] = getattr(est, part)
         rows.append(row)
