@@ -1,4 +1,5 @@
-"""Check that the relative links of README.md and docs/*.md resolve: files exist, anchors name a heading.
+"""Check that the relative links of README.md, CHANGELOG.md, docs/*.md and research/*.md resolve: files
+exist, anchors name a heading.
 
     python scripts/check_doc_links.py [FILE.md ...]
 
@@ -71,8 +72,14 @@ def broken_links(path: Path) -> list[str]:
     return problems
 
 
+def documents() -> list[Path]:
+    """The pages whose links are checked: the README, the changelog, the user docs and the research notes."""
+    top = [path for path in (ROOT / "README.md", ROOT / "CHANGELOG.md") if path.is_file()]
+    return [*top, *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "research").glob("*.md"))]
+
+
 def main(argv: list[str]) -> int:
-    files = [Path(a).resolve() for a in argv] or [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    files = [Path(a).resolve() for a in argv] or documents()
     problems = [p for f in files for p in broken_links(f)]
     print("\n".join(problems) if problems else f"{len(files)} files, every relative link resolves")
     return 1 if problems else 0

@@ -1,4 +1,5 @@
-"""The README and docs/*.md link to files and headings that exist (scripts/check_doc_links.py)."""
+"""The README, the changelog, docs/*.md and research/*.md link to files and headings that exist
+(scripts/check_doc_links.py)."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ def _checker():
 
 def test_readme_and_docs_links_resolve():
     checker = _checker()
-    files = [REPO_ROOT / "README.md", *sorted((REPO_ROOT / "docs").glob("*.md"))]
+    files = checker.documents()
+    assert REPO_ROOT / "README.md" in files and REPO_ROOT / "research" / "study.md" in files
     assert [p for f in files for p in checker.broken_links(f)] == []
 
 

@@ -1,5 +1,5 @@
 """The package's floors: every import (function-local ones included) points down or sideways, never
-up, and no two modules import each other, directly or around a loop; `studies/` has no loop either."""
+up, and no two modules import each other, directly or around a loop; `research/studies/` has no loop either."""
 
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def _imports(path: Path, module: str, package: str) -> set[str]:
 
 def import_graph(root: Path, package: str) -> dict[str, set[str]]:
     return {_module_name(p, root): _imports(p, _module_name(p, root), package)
-            for p in sorted((root / package).rglob("*.py"))}
+            for p in sorted((root / package.replace(".", "/")).rglob("*.py"))}
 
 
 def floor(module: str) -> int:
@@ -113,15 +113,16 @@ def test_no_import_points_to_a_higher_floor():
     assert not upward, "\n".join(upward)
 
 
-@pytest.mark.parametrize("package", ["hgm_repro", "studies", "analysis"])
+@pytest.mark.parametrize("package", ["hgm_repro", "research.studies", "analysis"])
 def test_no_import_cycle(package):
     graph = import_graph(REPO_ROOT, package)
-    if package == "studies":  # scripts import each other by their bare names (studies/ is on sys.path)
+    if package == "research.studies":  # scripts import each other by their bare names (their folder is on sys.path)
         names = {m.split(".")[-1] for m in graph}
-        for path in (REPO_ROOT / "studies").glob("*.py"):
+        for path in (REPO_ROOT / "research" / "studies").glob("*.py"):
             for node in ast.walk(ast.parse(path.read_text())):
                 if isinstance(node, ast.ImportFrom) and node.module in names and not node.level:
-                    graph[_module_name(path, REPO_ROOT)].add(f"studies.{node.module}")
+                    graph[_module_name(path, REPO_ROOT)].add(f"research.studies.{node.module}")
                 elif isinstance(node, ast.Import):
-                    graph[_module_name(path, REPO_ROOT)] |= {f"studies.{a.name}" for a in node.names if a.name in names}
+                    graph[_module_name(path, REPO_ROOT)] |= {f"research.studies.{a.name}" for a in node.names
+                                                             if a.name in names}
     assert not cycles(graph)

@@ -2,10 +2,10 @@
 validation passes, the pass with the best validation return among those at or before each budget,
 tested as the study tests (training traffic, the preset's test). Nothing is trained.
 
-    python studies/budget_cut.py --checkpoints studies/runs/checkpoints OTHER/checkpoints \
+    python research/studies/budget_cut.py --checkpoints research/studies/runs/checkpoints OTHER/checkpoints \
         --arms r20_all_160k r20_enriched_160k --seeds 100 101 102 103 104 --budgets 80000 120000 160000 \
-        --out docs/study/r20_budget/budget_cut.csv --figure docs/study/r20_budget/validation_passes.png \
-        --references docs/study/r20_reselect/learner_study_per_seed.csv
+        --out research/study/r20_budget/budget_cut.csv --figure research/study/r20_budget/validation_passes.png \
+        --references research/study/r20_reselect/learner_study_per_seed.csv
 
 One 160k-step training then answers for 80k and 120k too, at the cost of a test per distinct pass. It
 is close to, not the same as, a training that stops at the budget: every schedule of the quick presets
@@ -14,7 +14,7 @@ over the whole run, so at 80k steps of a 160k run it is half-way where an 80k ru
 The rows are named `ARM@bestNk` in the learner study's per-seed format, so that `learner_study.py
 report --earlier FILE --earlier-arms ARM@best80k` puts them in its table beside the arm's own best.pt.
 `--figure` draws every kept pass's validation return (as this code's validation scores it: passes of
-an older validation must be scored again first, studies/revalidate.py) per seed, with the human-driven
+an older validation must be scored again first, research/studies/revalidate.py) per seed, with the human-driven
 host's test return on that seed from `--references` (a learner-study per-seed CSV) as the bar.
 """
 
@@ -69,7 +69,7 @@ def main(argv: list[str] | None = None) -> None:
             stale = [q.env_steps for q in passes if not q.current]
             if stale:
                 p.error(f"{arm} seed {seed}: passes {stale} in {found[0]} were scored by the blank-frame validation "
-                        "of evaluation version 1; score them again first (studies/revalidate.py)")
+                        "of evaluation version 1; score them again first (research/studies/revalidate.py)")
             trainings[arm, seed] = (job, passes)
 
     rows, curve = [], []

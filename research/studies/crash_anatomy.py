@@ -1,8 +1,9 @@
-"""The crash anatomy of a learned host over several seeds: `studies/plateau.py`'s outputs, one folder
+"""The crash anatomy of a learned host over several seeds: `research/studies/plateau.py`'s outputs, one folder
 per seed, read together into one table and one figure.
 
-    python studies/plateau.py --checkpoint CKPT_OF_SEED --overrides experiment=quick seed=S --out DIR/S   # each seed
-    python studies/crash_anatomy.py DIR/100 DIR/101 ... --out docs/study/r20
+    python research/studies/plateau.py --checkpoint CKPT_OF_SEED --overrides experiment=quick seed=S \
+        --out DIR/S   # each seed
+    python research/studies/crash_anatomy.py DIR/100 DIR/101 ... --out research/study/r20
 
 Writes `crash_anatomy.csv` (per seed: collisions per episode by kind, tailgating per episode, the
 greedy return over the episodes that ended, and how many crash partners each sensor showed a decision
@@ -66,11 +67,12 @@ def figure(crashes: pd.DataFrame, path: Path) -> None:
 def main(argv: list[str] | None = None) -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("folders", nargs="+", type=Path, help="plateau.py --out folders, one per seed (named by the seed)")
-    p.add_argument("--out", type=Path, default=Path("docs/study"))
+    p.add_argument("--out", type=Path, default=Path("research/study"))
     args = p.parse_args(argv)
     missing = [str(f) for f in args.folders if not (f / "plateau_summary.json").is_file()]
     if missing:
-        p.error(f"no plateau.py output (plateau_summary.json) in {missing}: run studies/plateau.py --out there first")
+        p.error(f"no plateau.py output (plateau_summary.json) in {missing}: "
+                "run research/studies/plateau.py --out there first")
     rates, crashes = anatomy(args.folders)
     args.out.mkdir(parents=True, exist_ok=True)
     rates.to_csv(args.out / "crash_anatomy.csv", index=False, float_format="%.4g")

@@ -1,11 +1,11 @@
 """The learner study: which options make the quick preset's host learn to drive.
 
-    python studies/learner_study.py run --arms base nstep --seeds 100 101 [--parallel 2] [--references]
-    python studies/learner_study.py report [--store A.db B.db] [--out docs/study] \
-        [--earlier docs/study/r20/learner_study_per_seed.csv [MORE.csv] --earlier-arms r20_all@best]
+    python research/studies/learner_study.py run --arms base nstep --seeds 100 101 [--parallel 2] [--references]
+    python research/studies/learner_study.py report [--store A.db B.db] [--out docs/study] \
+        [--earlier research/study/r20/learner_study_per_seed.csv [MORE.csv] --earlier-arms r20_all@best]
 
 `run` trains and evaluates each (arm, seed) with `python -m hgm_repro` in the training traffic,
-into one SQLite store (`studies/runs/study.db` by default; the runs resume if interrupted);
+into one SQLite store (`research/studies/runs/study.db` by default; the runs resume if interrupted);
 `report` reads that store and writes the learning curves and a table of final test results
 (mean and 95% CI over seeds) to --out. Tuning seeds are 100-104: the published results use
 seeds 0-4, which no study arm ever trains on.
@@ -22,7 +22,7 @@ from pathlib import Path
 
 from study_arms import ARMS, ROOT, STUDY_REFERENCES
 
-RUNS = ROOT / "studies" / "runs"
+RUNS = ROOT / "research" / "studies" / "runs"
 
 
 def _command(arm: str, seed: int, uri: str, extra: list[str]) -> list[str]:
@@ -97,9 +97,10 @@ def main(argv: list[str] | None = None) -> None:
     rep = sub.add_parser("report", help="curves and final results from the store")
     rep.add_argument("--store", type=Path, nargs="+", default=[RUNS / "study.db"],
                      help="one or more study stores (e.g. one per session)")
-    rep.add_argument("--out", type=Path, default=ROOT / "docs" / "study")
+    rep.add_argument("--out", type=Path, default=ROOT / "research" / "study")
     rep.add_argument("--earlier", type=Path, nargs="+", metavar="PER_SEED_CSV",
-                     help="earlier reports' learner_study_per_seed.csv (or studies/budget_cut.py's CSV), whose "
+                     help="earlier reports' learner_study_per_seed.csv (or research/studies/budget_cut.py's CSV), "
+                          "whose "
                           "--earlier-arms rows join the table (arms measured in a session whose store is gone)")
     rep.add_argument("--earlier-arms", nargs="+", default=[], metavar="ARM",
                      help="the rows of --earlier to show, e.g. r20_all r20_all@best")

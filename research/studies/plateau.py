@@ -1,10 +1,10 @@
 """The plateau diagnosis: what crashes a learned host, and what its network can perceive.
 
-    python studies/plateau.py --checkpoint PATH [--overrides experiment=quick ...] [--out docs/study]
+    python research/studies/plateau.py --checkpoint PATH [--overrides experiment=quick ...] [--out docs/study]
 
 Drives the learned host (greedy, from a checkpoint) and IDM + MOBIL inside the host's own limits
 (no safety layer) through the same training traffic, classifies every collision and dangerous
-action (studies/incidents.py), and measures what the quick preset's observations show of the
+action (research/studies/incidents.py), and measures what the quick preset's observations show of the
 two things a driver needs most: the gap and closing speed to the vehicle ahead (camera), and the
 host's own speed (the HGM's host cells; the camera does not show it). Writes CSV files and PNG
 figures to --out.
@@ -36,7 +36,7 @@ from hgm_repro.observations import ObservationBuilder  # noqa: E402
 from hgm_repro.simulator import HOST, HighwaySimulator  # noqa: E402
 from hgm_repro.simulator.driver import attach  # noqa: E402
 
-CONF = Path(__file__).resolve().parents[1] / "conf"
+CONF = Path(__file__).resolve().parents[2] / "conf"
 
 
 def compose_job(overrides: list[str]) -> JobConfig:
@@ -112,7 +112,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--decisions", type=int, default=960, help="decisions per env (240 = one episode)")
     p.add_argument("--envs", type=int, default=16)
     p.add_argument("--seed", type=int, default=900_001, help="traffic seed (no test or training uses it)")
-    p.add_argument("--out", type=Path, default=Path("docs/study"))
+    p.add_argument("--out", type=Path, default=Path("research/study"))
     a = p.parse_args(argv)
     torch.set_num_threads(1)
     job = compose_job(a.overrides)

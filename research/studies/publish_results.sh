@@ -3,18 +3,18 @@
 # three reference hosts (conf/grid/references.yaml) at one preset, then the results bundle and the
 # report's figures and tables.
 #
-#   bash studies/publish_results.sh [extra Hydra overrides, e.g. experiment=paper device=cuda]
+#   bash research/studies/publish_results.sh [extra Hydra overrides, e.g. experiment=paper device=cuda]
 #
 # Resumable: a run cut off (a session's end, a kill) continues from its checkpoints when the same
 # command runs again; finished trainings and evaluations are reused, never redone. The store and
-# checkpoints live in studies/runs/results/ (not committed); docs/results/ gets only small files.
+# checkpoints live in research/studies/runs/results/ (not committed); docs/results/ gets only small files.
 # One model at a time (proposed first, then the reference hosts, then Min's and the Coordinate
 # model), so that a run cut off after an hour has whole rows of Table 6, the proposed model's
 # first, rather than a third of every row; the bundle and report are rewritten after each model.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 ROOT=$PWD
-RUNS=studies/runs/results
+RUNS=research/studies/runs/results
 mkdir -p "$RUNS"
 cd "$RUNS"
 publish() {

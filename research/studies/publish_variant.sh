@@ -4,9 +4,9 @@
 # (conf/grid/paper.yaml), in a store of its own; then its runs are read into the grid's bundle beside the
 # paper's models and the report is rebuilt. No claim reads a variant: the report tables and draws it.
 #
-#   bash studies/publish_variant.sh MODEL [extra Hydra overrides]
-#   bash studies/publish_variant.sh proposed_enriched experiment=quick160   # what docs/results holds
-#   bash studies/publish_variant.sh proposed_enriched experiment=quick160 "scenario='3'"   # one scenario first
+#   bash research/studies/publish_variant.sh MODEL [extra Hydra overrides]
+#   bash research/studies/publish_variant.sh proposed_enriched experiment=quick160   # what docs/results holds
+#   bash research/studies/publish_variant.sh proposed_enriched experiment=quick160 "scenario='3'"   # one scenario first
 #
 # Resumable as publish_results.sh is: run again, it reuses finished trainings and evaluations. Published
 # again, the variant's runs replace its earlier ones in docs/results/ (the grid's models stay as they are).
@@ -19,7 +19,7 @@ if [ -z "$model" ] || [ ! -f "conf/model/$model.yaml" ]; then
 fi
 shift
 ROOT=$PWD
-RUNS=studies/runs/variants/$model
+RUNS=research/studies/runs/variants/$model
 mkdir -p "$RUNS"
 (cd "$RUNS" && python -m hgm_repro -m grid=paper "model=$model" launcher=joblib "$@")
 (cd "$RUNS" && python -m analysis --write-bundle bundle --no-report)

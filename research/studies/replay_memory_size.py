@@ -1,6 +1,6 @@
 """How much memory a replay memory of N transitions takes at a preset, flat or frame-indexed.
 
-    python studies/replay_memory_size.py [--transitions 320000] [--overrides experiment=quick model=proposed]
+    python research/studies/replay_memory_size.py [--transitions 320000] [--overrides experiment=quick model=proposed]
 
 Fills both memories with a few hundred real transitions of the preset's env, reads the bytes one
 stored transition takes, and scales to N (the frame rings are sized for N as training sizes them).

@@ -1,6 +1,6 @@
 """Choose best.pt again, with the fixed validation, for a study arm's trainings that kept their passes.
 
-    python studies/revalidate.py --checkpoints studies/runs/checkpoints --arm r20_enriched_160k \
+    python research/studies/revalidate.py --checkpoints research/studies/runs/checkpoints --arm r20_enriched_160k \
         --seeds 100 101 102 103
 
 Before evaluation version 2 a validation pass handed hosts a blank frame whenever another env restarted

@@ -7,7 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def arm_job(arm: str, seed: int) -> Any:  # -> hgm_repro JobConfig (imported late: a script's --help stays fast)
@@ -135,7 +135,7 @@ _ARMS: dict[str, list[str]] = {
     "r20_ahead": R20_ALL + ["observation.hgm_ahead=80"],
     "r20_enriched": R20_ALL + ["model.streams.hgm=enriched"],
     # The enriched HGM's best.pt met the bar on 3 of 5 seeds at 80k steps with 0.04 collisions per
-    # episode (docs/study.md section 10), missing on return, not safety; 160k steps gave r20_all's
+    # episode (research/study.md section 10), missing on return, not safety; 160k steps gave r20_all's
     # validation a second chance at a good checkpoint (section 9). Section 11: best.pt met the bar on 4 of
     # 5 seeds (248 [219, 277], 0.09 collisions); with model=proposed_enriched it is experiment=quick160.
     "r20_enriched_160k": R20_ALL + ["model.streams.hgm=enriched", "learner.total_steps=160000"],
@@ -151,7 +151,7 @@ _ARMS: dict[str, list[str]] = {
     "r20_coordinate_160k_lr5e5": R20_ALL + ["model=coordinate", "learner.total_steps=160000",
                                             "learner.lr=0.00005"],
     # What the camera shows: the r20_all host's crashes are mostly lane changes into slow unconnected
-    # cars just ahead in the next lane, which only the camera shows (docs/study.md section 9); at
+    # cars just ahead in the next lane, which only the camera shows (research/study.md section 9); at
     # 36x36 such a car sits at the image's edge as a few pixels. The paper's 84x84 with 4 frames.
     "r20_camera84": R20_ALL + ["observation.height=84", "observation.width=84", "observation.frame_stack=4"],
 }

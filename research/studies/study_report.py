@@ -1,4 +1,4 @@
-"""Figures and tables of the learner study (studies/learner_study.py), from its MLflow store.
+"""Figures and tables of the learner study (research/studies/learner_study.py), from its MLflow store.
 
 Each run (training or evaluation) is matched to its arm through its logged config params.
 """
@@ -138,7 +138,7 @@ def _bar_count(grp: pd.DataFrame, results: pd.DataFrame) -> int:
 
 
 def earlier_results(per_seed_csv: Path | list[Path], arms: list[str]) -> pd.DataFrame:
-    """The rows of `arms` from earlier reports' learner_study_per_seed.csv (or studies/budget_cut.py's CSV):
+    """The rows of `arms` from earlier reports' learner_study_per_seed.csv (or research/studies/budget_cut.py's CSV):
     an arm measured in another session (whose store is gone) stands beside the new ones in the table, from
     its committed numbers. Of several files, the first that has an (arm, seed) gives it."""
     paths = [per_seed_csv] if isinstance(per_seed_csv, Path | str) else list(per_seed_csv)
@@ -153,11 +153,11 @@ def earlier_results(per_seed_csv: Path | list[Path], arms: list[str]) -> pd.Data
 
 def _checkpoint_overrides(checkpoint: str) -> list[str]:
     """What an arm's `@checkpoint` suffix tested: `best80k` is best.pt among the passes up to 80k env steps
-    (studies/budget_cut.py), the others are eval.checkpoint's own choices."""
+    (research/studies/budget_cut.py), the others are eval.checkpoint's own choices."""
     if not checkpoint:
         return []
     if checkpoint.startswith("best") and checkpoint != "best":
-        return ["eval.checkpoint=best", f"(passes up to {checkpoint[4:]} env steps: studies/budget_cut.py)"]
+        return ["eval.checkpoint=best", f"(passes up to {checkpoint[4:]} env steps: research/studies/budget_cut.py)"]
     return [f"eval.checkpoint={checkpoint}"]
 
 
@@ -173,7 +173,7 @@ def _blank_frame_tested(arm: str, rows: pd.DataFrame) -> bool:
 
 
 def markdown_table(results: pd.DataFrame, summary: pd.DataFrame) -> str:
-    """The study's table as docs/study.md shows it: per seed `return, collisions`, the mean over seeds
+    """The study's table as research/study.md shows it: per seed `return, collisions`, the mean over seeds
     with its 95% CI and the IQM, the collisions with their CI, and the seeds that meet issue 20's bar.
     A learned arm with a blank-frame test (evaluation version 1) says so after its name."""
     seeds = sorted(results["seed"].unique())
@@ -218,7 +218,7 @@ def report(stores: list[Path], out: Path, earlier: pd.DataFrame | None = None) -
             row[f"{m}_iqm"], row[f"{m}_iqm_lo"], row[f"{m}_iqm_hi"] = est.point, est.low, est.high
         row["seeds_beating_human_under_0.2"] = _bar_count(grp, results)
         rows.append(row)
-    # Each arm's rows together: its own tests, then other tests of it (studies/budget_cut.py's ARM@best80k
+    # Each arm's rows together: its own tests, then other tests of it (research/studies/budget_cut.py's ARM@best80k
     # before ARM@best120k: shorter names first); the reference hosts last.
     present = set(results["arm"])
     own = {arm: [arm, f"{arm}@best", f"{arm}@ema", f"{arm}@reselected"] for arm in ARMS}

@@ -2,8 +2,9 @@
 the human-driven host re-tested with a longer test than their preset's, in the same scenario and test
 traffic, no training.
 
-    python studies/test_length.py --runs studies/runs/variants/proposed_enriched --model proposed_enriched \
-        --overrides experiment=quick160 --scenario 3 --seeds 0 1 2 3 4 --steps 38400 --out docs/study/test_length
+    python research/studies/test_length.py --runs research/studies/runs/variants/proposed_enriched \
+        --model proposed_enriched \
+        --overrides experiment=quick160 --scenario 3 --seeds 0 1 2 3 4 --steps 38400 --out research/study/test_length
 
 `--runs` is the folder a publish script trained in (its `checkpoints/<train_key>/`). Each seed's network
 (the checkpoint the preset tests, `eval.checkpoint`) and the human-driven host drive `--steps` test
@@ -24,7 +25,7 @@ from pathlib import Path
 
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 REFERENCE = "human"
 
 
@@ -92,7 +93,7 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2, 3, 4])
     p.add_argument("--steps", type=int, default=38400, help="test decisions (the quick presets test 9,600)")
     p.add_argument("--jobs", type=int, default=2, help="tests at once (one core each)")
-    p.add_argument("--out", type=Path, default=ROOT / "docs" / "study" / "test_length")
+    p.add_argument("--out", type=Path, default=ROOT / "research" / "study" / "test_length")
     a = p.parse_args(argv)
     if a.steps <= 0:
         p.error(f"--steps {a.steps}: a test needs at least one decision")

@@ -1,4 +1,4 @@
-"""The numbers docs/results-narrative.md tells in words are the committed results bundle's: its test
+"""The numbers research/results-narrative.md tells in words are the committed results bundle's: its test
 table and the scenario-3 seeds it quotes are checked against docs/results, so that a re-run grid
 cannot leave the narrative behind unnoticed."""
 
@@ -12,7 +12,7 @@ import pytest
 from analysis.tables import summary
 from tests.helpers import REPO_ROOT
 
-NARRATIVE = REPO_ROOT / "docs" / "results-narrative.md"
+NARRATIVE = REPO_ROOT / "research" / "results-narrative.md"
 BUNDLE = REPO_ROOT / "docs" / "results"
 # The narrative's row labels and the models they stand for.
 ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (camera + V2X list)": "coordinate",
@@ -93,11 +93,11 @@ def test_the_test_noise_margins_the_narrative_quotes_are_the_bundles(opening: st
     assert int(quoted.group(2)) == int(mine["close"].sum())
 
 
-STUDY = REPO_ROOT / "docs" / "study.md"
+STUDY = REPO_ROOT / "research" / "study.md"
 
 
 def _study_section(number: str) -> str:
-    """docs/study.md's section `number`, up to the next section."""
+    """research/study.md's section `number`, up to the next section."""
     return STUDY.read_text().split(f"\n## {number}. ", 1)[1].split("\n## ", 1)[0]
 
 
@@ -105,12 +105,12 @@ def _margin_cell(row: pd.Series) -> str:
     """A test-length table's cell: a seed's margin over the human-driven host [95% interval], collisions."""
     return f"{row['margin']:.0f} [{row['margin_low']:.0f}, {row['margin_high']:.0f}], {row['collisions']:.2f}"
 # Each study section's tables that the study report wrote, as (section, the report's file).
-STUDY_TABLES = [("10", REPO_ROOT / "docs" / "study" / "r20_arms" / "learner_study_table.md"),
-                ("11", REPO_ROOT / "docs" / "study" / "r20_enriched_160k" / "learner_study_table.md"),
-                ("12", REPO_ROOT / "docs" / "study" / "r20_methods_160k" / "learner_study_table.md"),
-                ("14", REPO_ROOT / "docs" / "study" / "r20_reselect" / "learner_study_table.md"),
-                ("15", REPO_ROOT / "docs" / "study" / "r20_paper160" / "learner_study_table.md"),
-                ("15", REPO_ROOT / "docs" / "study" / "r20_methods_160k_v2" / "learner_study_table.md")]
+STUDY_TABLES = [("10", REPO_ROOT / "research" / "study" / "r20_arms" / "learner_study_table.md"),
+                ("11", REPO_ROOT / "research" / "study" / "r20_enriched_160k" / "learner_study_table.md"),
+                ("12", REPO_ROOT / "research" / "study" / "r20_methods_160k" / "learner_study_table.md"),
+                ("14", REPO_ROOT / "research" / "study" / "r20_reselect" / "learner_study_table.md"),
+                ("15", REPO_ROOT / "research" / "study" / "r20_paper160" / "learner_study_table.md"),
+                ("15", REPO_ROOT / "research" / "study" / "r20_methods_160k_v2" / "learner_study_table.md")]
 
 
 @pytest.mark.parametrize(("section", "path"), STUDY_TABLES, ids=[f"{s}-{p.parent.name}" for s, p in STUDY_TABLES])
@@ -118,10 +118,10 @@ def test_a_study_sections_table_is_the_one_the_study_report_wrote(section: str, 
     if not path.is_file():
         pytest.skip(f"no committed study table {path.name} for section {section}")
     text = _study_section(section)
-    assert path.read_text().strip() in text, f"docs/study.md section {section}'s table differs from {path}"
+    assert path.read_text().strip() in text, f"research/study.md section {section}'s table differs from {path}"
 
 
-TEST_LENGTH = REPO_ROOT / "docs" / "study" / "test_length" / "margins.csv"
+TEST_LENGTH = REPO_ROOT / "research" / "study" / "test_length" / "margins.csv"
 PUBLISHED_BEFORE_FIX = TEST_LENGTH.parent / "published_before_fix.csv"
 
 
@@ -146,7 +146,7 @@ def test_the_test_length_sections_table_is_its_csv_and_its_short_test_is_the_pub
         assert (both[column] - both[f"{column}_published"]).abs().max() < 1e-3, column
 
 
-TEST_LENGTH_V2 = REPO_ROOT / "docs" / "study" / "test_length_v2" / "margins.csv"
+TEST_LENGTH_V2 = REPO_ROOT / "research" / "study" / "test_length_v2" / "margins.csv"
 
 
 @pytest.mark.skipif(not (TEST_LENGTH.is_file() and TEST_LENGTH_V2.is_file()), reason="no committed re-tests")
@@ -167,7 +167,7 @@ def test_the_fixed_re_tests_table_is_both_csvs_and_the_human_host_did_not_move()
         assert (tables["before", test]["ref_return"] - tables["after", test]["ref_return"]).abs().max() < 1e-3
 
 
-TEST_LENGTH_PAPER = REPO_ROOT / "docs" / "study" / "test_length_paper" / "margins.csv"
+TEST_LENGTH_PAPER = REPO_ROOT / "research" / "study" / "test_length_paper" / "margins.csv"
 
 
 @pytest.mark.skipif(not (TEST_LENGTH_PAPER.is_file() and (BUNDLE / "evals.csv").is_file()),

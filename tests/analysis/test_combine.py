@@ -67,7 +67,7 @@ def test_cli_reads_several_bundles_as_one_and_writes_them_back_as_one(tmp_path: 
     grid, variant = data_of(("proposed", "min", "human"), "grid"), data_of(("proposed_enriched",), "variant")
     write_bundle(grid, tmp_path / "grid")
     write_bundle(variant, tmp_path / "variant")
-    # Into the grid's own folder, as studies/publish_variant.sh does: it reads before it writes.
+    # Into the grid's own folder, as research/studies/publish_variant.sh does: it reads before it writes.
     assert main(["--bundle", str(tmp_path / "grid"), str(tmp_path / "variant"), "--write-bundle",
                  str(tmp_path / "grid"), "--no-report"]) == 0
     back = load_bundle(tmp_path / "grid")

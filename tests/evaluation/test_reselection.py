@@ -199,7 +199,7 @@ def test_revalidation_scores_kept_passes_as_training_did_and_chooses_best_pt_aga
 
 
 def test_best_pass_within_a_budget_is_what_a_shorter_training_would_keep(trained) -> None:
-    """best_pass with a budget takes the best of the passes at or before it (studies/budget_cut.py tests it as
+    """best_pass with a budget takes the best of the passes at or before it (research/studies/budget_cut.py tests it as
     a shorter training's best.pt); without one it is the training's own best.pt; a budget before the first
     pass is refused with the passes' steps."""
     _, outcome = trained

@@ -1,4 +1,4 @@
-"""studies/crash_anatomy.py: plateau.py's per-seed outputs gathered into one table and one figure."""
+"""research/studies/crash_anatomy.py: plateau.py's per-seed outputs gathered into one table and one figure."""
 
 from __future__ import annotations
 
@@ -12,14 +12,15 @@ from tests.helpers import REPO_ROOT
 
 
 def _module():
-    spec = importlib.util.spec_from_file_location("crash_anatomy", REPO_ROOT / "studies" / "crash_anatomy.py")
+    script = REPO_ROOT / "research" / "studies" / "crash_anatomy.py"
+    spec = importlib.util.spec_from_file_location("crash_anatomy", script)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
 
 
 def _plateau_folder(root, seed, crashes):
-    """A folder as studies/plateau.py writes it: the summary, and one row per collision of both hosts."""
+    """A folder as research/studies/plateau.py writes it: the summary, and one row per collision of both hosts."""
     folder = root / str(seed)
     folder.mkdir()
     kinds = ("host_into_leader", "follower_into_host", "host_lane_change", "other_lane_change")
@@ -59,4 +60,4 @@ def test_a_folder_without_plateau_output_is_named(tmp_path, capsys):
         _module().main([str(tmp_path / "103")])
     assert stop.value.code == 2
     err = capsys.readouterr().err
-    assert "103" in err and "studies/plateau.py" in err
+    assert "103" in err and "research/studies/plateau.py" in err

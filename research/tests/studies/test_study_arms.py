@@ -1,4 +1,4 @@
-"""studies/study_arms.py: every arm is a list of overrides that the quick preset accepts (an arm with a
+"""research/studies/study_arms.py: every arm is a list of overrides that the quick preset accepts (an arm with a
 key no config has would fail only after the study has queued it, as r20_enriched once did)."""
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from hgm_repro.contracts.conf_dir import CONF_DIR
 from hgm_repro.contracts.schema import check_config
 from tests.helpers import REPO_ROOT
 
-sys.path.insert(0, str(REPO_ROOT / "studies"))
-from study_arms import ARMS  # noqa: E402 - studies/ is a folder of scripts, not a package
+sys.path.insert(0, str(REPO_ROOT / "research" / "studies"))
+from study_arms import ARMS  # noqa: E402 - research/studies/ is a folder of scripts, not a package
 
 
 @pytest.mark.parametrize("arm", sorted(ARMS))

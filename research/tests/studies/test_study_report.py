@@ -1,4 +1,4 @@
-"""studies/study_report.py's table: the per-seed cells, the bar count against each seed's human-driven
+"""research/studies/study_report.py's table: the per-seed cells, the bar count against each seed's human-driven
 host, and rows taken from an earlier report's CSV."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import pytest
 
 from tests.helpers import REPO_ROOT
 
-sys.path.insert(0, str(REPO_ROOT / "studies"))
-import study_report  # noqa: E402 - studies/ is a folder of scripts, not a package
+sys.path.insert(0, str(REPO_ROOT / "research" / "studies"))
+import study_report  # noqa: E402 - research/studies/ is a folder of scripts, not a package
 
 
 def _rows(arm: str, returns: list[float], collisions: list[float], seeds=(100, 101, 102)) -> list[dict]:
@@ -36,7 +36,7 @@ def test_the_table_counts_a_seed_only_when_it_beats_that_seeds_human_host_under_
 
 
 def test_a_budget_cut_row_stands_in_the_table_with_the_arms_own_rows_and_says_what_it_tested(tmp_path):
-    """studies/budget_cut.py writes ARM@best80k rows (best.pt among the passes up to 80k): the report keeps
+    """research/studies/budget_cut.py writes ARM@best80k rows (best.pt among the passes up to 80k): the report keeps
     them (a summary limited to the known suffixes dropped them), beside the arm's own rows and before the
     reference hosts, and its overrides name the cut."""
     results = pd.DataFrame(_rows("human", [240, 220, 230], [0, 0, 0]) + _rows("r20_all_160k@best", [250, 230, 240],

@@ -1,0 +1,1 @@
+"""Tests of the research notes' numbers and of the study scripts: `python -m pytest research/tests`."""
