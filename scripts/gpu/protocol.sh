@@ -42,8 +42,8 @@ BENCH_S=${BENCH_S:-150}
 RESERVE_S=${RESERVE_S:-60}
 PY=${PYTHON:-python3}
 SITE=${SITE:-/tmp/site}
-OUT=${OUT:-$ROOT/studies/runs/gpu/out}
-RUNS=${RUNS:-$ROOT/studies/runs/gpu}  # the store, checkpoints and bundle (on the machine, never in $OUT)
+OUT=${OUT:-$ROOT/runs/gpu/out}
+RUNS=${RUNS:-$ROOT/runs/gpu}  # the store, checkpoints and bundle (on the machine, never in $OUT)
 DEVICE=${DEVICE:-cuda}
 EXPERIMENT=${EXPERIMENT:-paper}
 if [ "$DEVICE" = cpu ]; then cpu=1; else cpu=0; fi
