@@ -87,7 +87,7 @@ class LearnerSchema:
     reward_scale: float = field(metadata=gt(0))
     collision_weight: float = field(metadata=gt(0))
     loss_function: Literal["l2", "l1", "smooth_l1"]
-    # Options from the learner study of issue 20 (hgm_repro.learner.exploration, member); each
+    # Learning options beyond the paper (hgm_repro.learner.exploration, member); each
     # default in dqn.yaml trains as the learner did before the option existed.
     eps_floor: float = field(metadata=unit())
     eps_floor_steps: int = field(metadata=ge(0))

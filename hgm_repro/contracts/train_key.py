@@ -24,8 +24,9 @@ from .schema import JobConfig
 # old checkpoints are not silently reused by new code.
 # 2: the simulator stopped paying R_o on crash steps and charges a crash to the decision it happens in
 # (docs/interfaces.md): trainings of version 1 learned from other rewards and are not reused.
-# 3: the config's groups by concern (issue 21): the identity hashes whole groups, with no lists of
-# keys left out; trainings of version 2 are not reused (a checkpoint of one is refused by name).
+# 3: the config's groups by concern (eval, runtime and logging apart from learner): the identity hashes
+# whole groups, with no lists of keys left out; trainings of version 2 are not reused (a checkpoint of
+# one is refused by name).
 TRAIN_KEY_VERSION = 3
 KEY_LENGTH = 12
 
