@@ -126,3 +126,12 @@ def test_no_import_cycle(package):
                     graph[_module_name(path, REPO_ROOT)] |= {f"research.studies.{a.name}" for a in node.names
                                                              if a.name in names}
     assert not cycles(graph)
+
+
+
+@pytest.mark.parametrize("package", ["hgm_repro", "analysis", "baselines"])
+def test_the_product_never_imports_research(package):
+    """research/ is the lab notebook beside the product: the wheel does not ship it."""
+    reaching = [str(path.relative_to(REPO_ROOT)) for path in sorted((REPO_ROOT / package).rglob("*.py"))
+                if _imports(path, _module_name(path, REPO_ROOT), "research")]
+    assert reaching == []
