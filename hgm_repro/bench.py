@@ -276,7 +276,7 @@ PARTS = ("simulator", "observations", "envs", "learner", "grouped", "highway")  
 
 
 def _member_job(device: torch.device, total_steps: int, seed: int, threads: int, preset: str = "quick",
-                warmup_steps: int | None = None, log_every: int | None = None) -> Any:
+                warmup_steps: int | None = None, log_every: int | None = None, overrides: tuple[str, ...] = ()) -> Any:
     """One training member of the grouped-training lines: `preset` (the quick one's env count resized
     to the device), no validation, no logs but the last (or every `log_every` env steps)."""
     sized = [f"learner.n_envs={16 if device.type == 'cpu' else 64}"] if preset == "quick" else []
@@ -285,7 +285,7 @@ def _member_job(device: torch.device, total_steps: int, seed: int, threads: int,
                     f"runtime.torch_threads={threads}", "eval.val_every=0",
                     "eval.checkpoint=final",  # no validation, so no best.pt for the preset's test to drive
                     f"logging.checkpoint_every={total_steps * 10}",
-                    f"logging.log_every={log_every or total_steps * 10}")
+                    f"logging.log_every={log_every or total_steps * 10}", *overrides)
 
 
 def _quiet_torchrl() -> None:
@@ -312,7 +312,7 @@ def _train_member(device: str, total_steps: int, seed: int, threads: int, direct
 
 def bench_grouped_training(device: torch.device, total_steps: int, members: int, path: str,
                            threads: int, preset: str = "quick", warmup_steps: int | None = None,
-                           log_every: int | None = None) -> dict[str, Any]:
+                           log_every: int | None = None, overrides: tuple[str, ...] = ()) -> dict[str, Any]:
     """Aggregate training speed of `members` seeds with `preset` (default quick), end to end, by one of
     three paths: `grouped` (one process, one simulator and one Collector for the members, `threads` torch threads),
     `sequential` (one process, the members one after another on `threads` threads) or `parallel`
@@ -332,7 +332,7 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
 
     if path not in GROUPED_PATHS:
         raise ValueError(f"path={path!r} is not one of {GROUPED_PATHS}")
-    jobs = [_member_job(device, total_steps, seed, threads, preset, warmup_steps, log_every)
+    jobs = [_member_job(device, total_steps, seed, threads, preset, warmup_steps, log_every, overrides)
             for seed in range(members)]
     before = torch.get_num_threads()
     processes = 1
@@ -371,6 +371,8 @@ def bench_grouped_training(device: torch.device, total_steps: int, members: int,
         row.update(preset=preset, member_steps=counts[0][0], warmup_steps=jobs[0].learner.warmup_steps,
                    update_every=jobs[0].learner.update_every, member_env_steps_per_s=round(member_rate, 1),
                    fixed_s=round(max(elapsed - counts[0][0] / member_rate, 0.0), 2))
+    if overrides:
+        row["overrides"] = " ".join(overrides)
     return row
 
 
@@ -555,6 +557,9 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rate-members", type=int, default=5,
                         help="members of the rate line: one grouped training, its loop's rate per member and its "
                              "fixed cost, what a training budget is sized from (default: %(default)s)")
+    parser.add_argument("--rate-overrides", default="",
+                        help="Hydra overrides for the rate line's trainings, space-separated, e.g. "
+                             "'runtime.cuda_graph=true' (default: none)")
     parser.add_argument("--rate-steps", type=int, default=4096,
                         help="env steps per member of the rate line (default: %(default)s)")
     parser.add_argument("--update-members", default="15",
@@ -653,7 +658,8 @@ def main(argv: list[str] | None = None) -> int:
             print(f"training rate: {members} members grouped, {args.preset} preset, on {device}...", file=sys.stderr)
             emit(bench_grouped_training(device, args.rate_steps, members, "grouped", threads=torch.get_num_threads(),
                                         preset=args.preset, log_every=max(1, args.rate_steps // 2),
-                                        warmup_steps=_compose(f"experiment={args.preset}").learner.batch_size))
+                                        warmup_steps=_compose(f"experiment={args.preset}").learner.batch_size,
+                                        overrides=tuple(args.rate_overrides.split())))
         if "grouped_update" in parts:
             modes = args.update_modes.split(",") if args.update_modes else \
                 (list(GROUPED_UPDATE_MODES) if gpu else ["eager"])

@@ -73,15 +73,35 @@ def _target_flags(python_version: str) -> list[str]:
     return flags
 
 
+# pip names a pin it cannot meet for the target (no wheel of that version for its Python) this way.
+UNMET_PIN = re.compile(r"The user requested \(constraint\) ([A-Za-z0-9_.\-]+)==")
+
+
 def resolve(requirements: list[str], pins: dict[str, str], python_version: str, find_links: Path) -> dict[str, str]:
-    """The full dependency closure for the target interpreter, as name -> version."""
+    """The full dependency closure for the target interpreter, as name -> version.
+
+    A version installed here that has no wheel for the target Python (an older orjson built for
+    3.11 only, say) cannot be pinned there: its pin is dropped, said on stderr, and pip chooses."""
+    pins = {n: v for n, v in pins.items() if not KEEP_THEIRS.match(n) and n != "hgm-repro"}
     with tempfile.TemporaryDirectory() as tmp:
         constraints = Path(tmp) / "constraints.txt"
-        constraints.write_text("".join(f"{name}=={version}\n" for name, version in sorted(pins.items())
-                                       if not KEEP_THEIRS.match(name) and name != "hgm-repro"))
         report = Path(tmp) / "report.json"
-        _pip("install", "--dry-run", "--ignore-installed", "--report", str(report), "--target", str(Path(tmp) / "t"),
-             "--find-links", str(find_links), "-c", str(constraints), *_target_flags(python_version), *requirements)
+        for _ in range(len(pins) + 1):
+            constraints.write_text("".join(f"{name}=={version}\n" for name, version in sorted(pins.items())))
+            done = subprocess.run([sys.executable, "-m", "pip", "install", "--dry-run", "--ignore-installed",
+                                   "--report", str(report), "--target", str(Path(tmp) / "t"), "--find-links",
+                                   str(find_links), "-c", str(constraints), *_target_flags(python_version),
+                                   *requirements, "--disable-pip-version-check"],
+                                  capture_output=True, text=True)
+            if done.returncode == 0:
+                break
+            unmet = {normalise(n) for n in UNMET_PIN.findall(done.stdout + done.stderr)} & set(pins)
+            if not unmet:
+                sys.stderr.write(done.stderr)
+                raise SystemExit(f"pip could not resolve the requirements for Python {python_version}")
+            for name in sorted(unmet):
+                print(f"{name}=={pins.pop(name)} has no wheel for Python {python_version} here: not pinned",
+                      file=sys.stderr)
         installs = json.loads(report.read_text())["install"]
     return {normalise(i["metadata"]["name"]): i["metadata"]["version"] for i in installs}
 
