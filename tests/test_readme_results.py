@@ -1,0 +1,119 @@
+"""The README's Results section tells the committed results bundle (docs/results) to the printed digit: its
+table of return and collisions per host, the paired differences to the human-driven host it quotes, and the
+verdict on each of the paper's claims, so that a re-published bundle cannot leave the README behind."""
+
+from __future__ import annotations
+
+import re
+
+import pandas as pd
+import pytest
+
+from analysis.claims import NOT_SUPPORTED, SUPPORTED, TIE, VERDICTS
+from analysis.stats import difference_ci
+from analysis.tables import headline, per_scenario
+from tests.helpers import REPO_ROOT
+
+README = REPO_ROOT / "README.md"
+BUNDLE = REPO_ROOT / "docs" / "results"
+SCENARIOS = ["1", "2", "3", "4", "5"]
+# The README table's row labels and the models they stand for.
+ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (camera + V2X list)": "coordinate",
+        "Variant: enriched HGM, 160k steps": "proposed_enriched", "Human-driven host": "human",
+        "IDM + MOBIL": "idm_mobil"}
+# The table's columns after the label, as headline() names them.
+COLUMNS = ["episode_return/scenario", "episode_return/mean", "collisions/scenario", "collisions/mean"]
+# The sentences that quote a host's paired return difference to the human-driven host, and the model each quotes.
+PAIRED = {"the proposed host's": "proposed", "its": "proposed_enriched"}
+CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?) \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\]$")
+needs_bundle = pytest.mark.skipif(not (BUNDLE / "evals.csv").is_file(), reason="no committed results bundle")
+
+
+def _results_section() -> str:
+    text = README.read_text()
+    assert "\n## Results\n" in text, "the README has no Results section"
+    return text.split("\n## Results\n", 1)[1].split("\n## ", 1)[0]
+
+
+def _evals() -> pd.DataFrame:
+    return pd.read_csv(BUNDLE / "evals.csv", dtype={"scenario": str})
+
+
+def _same_to_the_printed_digit(shown: str, exact: float) -> bool:
+    """`shown` is `exact` written with as many decimals as `shown` has (a sign and -0 aside)."""
+    decimals = len(shown.split(".", 1)[1]) if "." in shown else 0
+    return float(shown) == float(f"{exact:.{decimals}f}")
+
+
+def _table(section: str) -> dict[str, list[str]]:
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if line.startswith("|") and cells[0] in ROWS:
+            rows[cells[0]] = cells[1:]
+    return rows
+
+
+def _mismatches(section: str, evals: pd.DataFrame) -> list[str]:
+    """Every cell of the README's Results table that differs from the bundle's headline numbers."""
+    table = headline(evals, SCENARIOS).set_index("model")
+    rows = _table(section)
+    wrong = [f"rows {sorted(rows)} are not {sorted(ROWS)}"] if set(rows) != set(ROWS) else []
+    for label, cells in rows.items():
+        if len(cells) != len(COLUMNS):
+            wrong.append(f"{label}: {len(cells)} cells")
+            continue
+        for column, cell in zip(COLUMNS, cells, strict=True):
+            parsed = CELL.match(cell)
+            want = [table.loc[ROWS[label], f"{column}/{part}"] for part in ("point", "low", "high")]
+            if not parsed or not all(map(_same_to_the_printed_digit, parsed.groups(), want)):
+                wrong.append(f"{label}, {column}: {cell!r}, the bundle {want}")
+    return wrong
+
+
+@needs_bundle
+def test_the_readmes_results_table_is_the_bundles_to_the_printed_digit():
+    assert _mismatches(_results_section(), _evals()) == []
+
+
+@needs_bundle
+def test_the_check_fails_when_one_readme_number_changes():
+    section, evals = _results_section(), _evals()
+    row = next(line for line in section.splitlines() if line.startswith("| Proposed (HGM + camera) |"))
+    cells = row.split("|")
+    cells[2] = re.sub(r"\d+", lambda m: str(int(m.group()) + 1), cells[2], count=1)  # the scenario-3 return + 1
+    assert _mismatches(section.replace(row, "|".join(cells)), evals)
+
+
+def _verdict(low: float, high: float) -> str:
+    return SUPPORTED if low > 0 else NOT_SUPPORTED if high < 0 else TIE
+
+
+@needs_bundle
+@pytest.mark.parametrize("whose", sorted(PAIRED))
+def test_the_paired_differences_to_the_human_driven_host_are_the_bundles(whose: str):
+    text = " ".join(_results_section().split())
+    number = r"([+-]?\d+) \[(-?\d+), (-?\d+)\]"
+    quoted = re.search(rf"{whose} return minus the human-driven host's is {number} per episode in scenario 3 and "
+                       rf"{number} over the mean of scenarios: a \*\*({'|'.join(VERDICTS)})\*\*", text)
+    assert quoted, f"the README's sentence on {whose} return minus the human-driven host's is gone"
+    evals = _evals()
+    mine, human = per_scenario(evals, PAIRED[whose], "episode_return"), per_scenario(evals, "human", "episode_return")
+    estimates = [difference_ci({"3": mine["3"]}, {"3": human["3"]}), difference_ci(mine, human)]
+    for shown, est in zip((quoted.groups()[:3], quoted.groups()[3:6]), estimates, strict=True):
+        assert all(map(_same_to_the_printed_digit, shown, (est.point, est.low, est.high))), (shown, est)
+    # The word is the report's: a tie where either interval covers 0.
+    words = {_verdict(est.low, est.high) for est in estimates}
+    assert quoted.group(7) == (TIE if TIE in words else words.pop())
+
+
+@pytest.mark.skipif(not (BUNDLE / "report" / "claims.csv").is_file(), reason="no committed claims table")
+def test_the_readme_gives_each_claim_the_reports_verdict():
+    text = " ".join(_results_section().split())
+    sentence = text.split("The paper's seven claims on these seeds:", 1)
+    assert len(sentence) == 2, "the README's sentence on the paper's claims is gone"
+    said = {}
+    for word, numbers in re.findall(rf"\*\*({'|'.join(VERDICTS)})\*\*: claims? ((?:\d+(?:, | and )?)+)", sentence[1]):
+        said |= {int(n): word for n in re.findall(r"\d+", numbers)}
+    claims = pd.read_csv(BUNDLE / "report" / "claims.csv")
+    assert said == dict(zip(claims["claim"].astype(int), claims["verdict"], strict=True))
