@@ -14,6 +14,8 @@ from functools import lru_cache
 import numpy as np
 from PIL import Image, ImageDraw, ImageFont
 
+from ..observations.grid import GridGeometry
+from ..observations.hyper_grid_matrix import decode_hgm
 from ..simulator.highway import HighwaySimulator
 from ..simulator.state import HOST, Action
 
@@ -184,8 +186,11 @@ def _legend(draw: ImageDraw.ImageDraw, top: float, width: float, strip_h: float,
 PANEL_BG = (16, 16, 20)
 CHOSEN = (255, 220, 40)
 BAR = (120, 150, 190)
-PANEL = 224  # px, the side of the camera and HGM panels
+AXIS = (150, 150, 158)
+PANEL = 224  # px, the side of the camera panel and the height of the top row's panels
 TITLE_H = 18
+HGM_PANEL_W = 480  # px: the HGM panel is wide, since it lies along the road like the top-down view
+HGM_MARGIN = (40, 10, 44, 46)  # px around the HGM's plot: left (across ticks), right, top, bottom (ticks, bar)
 
 
 def hgm_colour_limit(sim_config) -> float:
@@ -212,36 +217,128 @@ def _titled(picture: np.ndarray, title: str, size: tuple[int, int]) -> Image.Ima
     return panel
 
 
-def _action_values_panel(action_values: np.ndarray, chosen: int | None, size: tuple[int, int]) -> Image.Image:
-    """One row per action: its name, a bar from the smallest to the largest Q, the value; the chosen one highlighted."""
+def hgm_plot_box(window: GridGeometry, size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """(left, top, right, bottom) px of the HGM's plot inside its panel of `size`: one scale in metres
+    along and across the road (as in the top-down view), as large as the panel's margins allow."""
+    left, right, top, bottom = HGM_MARGIN[0], size[0] - HGM_MARGIN[1], HGM_MARGIN[2], size[1] - HGM_MARGIN[3]
+    along, across = window.ahead + window.behind, window.right - window.left
+    px_per_m = min((right - left) / along, (bottom - top) / across)
+    plot_w, plot_h = int(round(along * px_per_m)), int(round(across * px_per_m))
+    left, top = left + (right - left - plot_w) // 2, top + (bottom - top - plot_h) // 2
+    return left, top, left + plot_w, top + plot_h
+
+
+def hgm_panel(values: np.ndarray, window: GridGeometry, sim: HighwaySimulator, env_index: int, limit: float,
+              size: tuple[int, int]) -> Image.Image:
+    """The HGM the network read, turned to lie like the top-down view: forward to the right, the left road
+    edge at the top, in metres from the host along the road and from the left edge across it; the host's
+    box outlined as in the top-down view; below, the colour scale in km/h.
+
+    `values`: decoded cell values [H, W] (row 0 farthest ahead, column 0 at the left edge); `window`: the
+    grid's extent (`hyper_grid_matrix.hgm_geometry`)."""
+    panel = Image.new("RGB", size, PANEL_BG)
+    draw = ImageDraw.Draw(panel)
+    font = _font(11)
+    draw.text((4, TITLE_H / 2), f"HGM {values.shape[0]}x{values.shape[1]} (input), as on the road below",
+              fill=TEXT, font=_font(12), anchor="lm")
+    x0, y0, x1, y1 = hgm_plot_box(window, size)
+    # Clockwise a quarter turn: rows along the road become columns, ahead on the right.
+    picture = np.ascontiguousarray(np.rot90(hgm_picture(values, limit), k=-1))
+    panel.paste(Image.fromarray(picture).resize((x1 - x0, y1 - y0), Image.Resampling.NEAREST), (x0, y0))
+
+    def px(lon: float) -> float:
+        return x0 + (lon + window.behind) / (window.ahead + window.behind) * (x1 - x0)
+
+    def py(lat: float) -> float:
+        return y0 + (lat - window.left) / (window.right - window.left) * (y1 - y0)
+
+    cfg = sim.config
+    for k in range(1, cfg.lanes):  # lane lines, faint: the cells themselves carry the information
+        y = py(k * cfg.lane_width)
+        for x in np.arange(x0, x1, 6.0):
+            draw.line([(x, y), (min(x + 2, x1), y)], fill=AXIS)
+    draw.rectangle([x0 - 1, y0 - 1, x1, y1], outline=AXIS)
+    # Along the road: metres from the host, forward to the right.
+    step = 20.0 if window.ahead + window.behind >= 60 else 10.0
+    for lon in np.arange(-np.floor(window.behind / step) * step, window.ahead + 1e-6, step):
+        x = px(lon)
+        draw.line([(x, y1), (x, y1 + 3)], fill=AXIS)
+        draw.text((x, y1 + 4), f"{lon:+.0f}" if lon else "0", fill=TEXT, font=font, anchor="mt")
+    label_y = y1 + 22
+    draw.text((x0, label_y), "m from the host along the road", fill=TEXT, font=font, anchor="lm")
+    arrow_x = x1 - 6
+    draw.text((arrow_x - 22, label_y), "forward", fill=TEXT, font=font, anchor="rm")
+    draw.line([(arrow_x - 18, label_y), (arrow_x, label_y)], fill=TEXT, width=2)
+    draw.polygon([(arrow_x + 2, label_y), (arrow_x - 5, label_y - 4), (arrow_x - 5, label_y + 4)], fill=TEXT)
+    # Across the road: metres from the left road edge (lane 0 at the top, as in the top-down view).
+    for lat in np.arange(window.left, window.right + 1e-6, 5.0):
+        y = py(lat)
+        draw.line([(x0 - 4, y), (x0 - 1, y)], fill=AXIS)
+        draw.text((x0 - 6, y), f"{lat:.0f}", fill=TEXT, font=font, anchor="rm")
+    draw.text((x0 - 6, y0 - 8), "m from the left road edge", fill=TEXT, font=font, anchor="ls")
+    # The host: its collision box at 0 m, outlined in the top-down view's host colour.
+    s = sim.state.select_env(env_index).to("cpu")
+    vtype = int(s.vtype[0, HOST])
+    half_len, half_wid = float(sim.half_len_by_type[vtype]), float(sim.half_wid_by_type[vtype])
+    lat = float(s.pos_lat[0, HOST])
+    draw.rectangle([px(-half_len) - 2, py(lat - half_wid) - 2, px(half_len) + 2, py(lat + half_wid) + 2],
+                   outline=HOST_OUTLINE, width=2)
+    # The colour scale: a cell's value is its vehicle's speed relative to v_mid.
+    v_mid = (cfg.v_max + cfg.v_min) / 2
+    bar_top, bar_w = y1 + 34, min(180, x1 - x0)
+    high_text = f"{v_mid * (1 + limit) * 3.6:.0f} km/h"
+    bar_x = int(x1 - draw.textlength(high_text, font=font) - 4 - bar_w)
+    ramp = hgm_picture(np.linspace(-limit, limit, bar_w)[None, :], limit)
+    panel.paste(Image.fromarray(np.repeat(ramp, 8, axis=0)), (bar_x, bar_top))
+    draw.text((bar_x - 4, bar_top + 4), f"cell = its vehicle's speed: {v_mid * (1 - limit) * 3.6:.0f}",
+              fill=TEXT, font=font, anchor="rm")
+    draw.text((bar_x + bar_w + 4, bar_top + 4), high_text, fill=TEXT, font=font, anchor="lm")
+    draw.text((bar_x + bar_w / 2, bar_top + 10), f"{v_mid * 3.6:.0f} (or empty)", fill=TEXT, font=font,
+              anchor="mt")
+    return panel
+
+
+def action_values_panel(action_values: np.ndarray, chosen: int | None, size: tuple[int, int]) -> Image.Image:
+    """One row per action: its name, a bar from 0 to its Q-value (left of the zero line when negative), the
+    value; the chosen one highlighted."""
     w, h = size
     panel = Image.new("RGB", (w, h), PANEL_BG)
     draw = ImageDraw.Draw(panel)
     font = _font(13)
     draw.text((6, TITLE_H / 2), "Q-values (greedy: the largest is chosen)", fill=TEXT, font=_font(12), anchor="lm")
-    lo, hi = float(action_values.min()), float(action_values.max())
+    lo, hi = min(float(action_values.min()), 0.0), max(float(action_values.max()), 0.0)
     span = max(hi - lo, 1e-6)
-    row_h = (h - TITLE_H - 6) / len(action_values)
-    name_w, value_w = 110, 80
+    name_w, value_w, axis_h = 110, 80, 16
+    bar_w = w - name_w - value_w - 12
+    row_h = (h - TITLE_H - 6 - axis_h) / len(action_values)
+
+    def px(q: float) -> float:
+        return name_w + bar_w * (q - lo) / span
+
     for a, q in enumerate(action_values):
         y = TITLE_H + 3 + a * row_h
         colour = CHOSEN if a == chosen else TEXT
         name = Action(a).name.lower().replace("_", " ")
         draw.text((6, y + row_h / 2), ("> " if a == chosen else "  ") + name, fill=colour, font=font, anchor="lm")
-        bar = (w - name_w - value_w - 12) * (0.08 + 0.92 * (float(q) - lo) / span)
-        draw.rectangle([name_w, y + row_h * 0.2, name_w + bar, y + row_h * 0.8], fill=CHOSEN if a == chosen else BAR)
+        ends = sorted((px(0.0), px(float(q))))
+        draw.rectangle([ends[0], y + row_h * 0.2, ends[1], y + row_h * 0.8], fill=CHOSEN if a == chosen else BAR)
         draw.text((w - 6, y + row_h / 2), f"{float(q):+.3f}", fill=colour, font=font, anchor="rm")
+    bottom = TITLE_H + 3 + len(action_values) * row_h
+    draw.line([(px(0.0), TITLE_H + 3), (px(0.0), bottom + 2)], fill=AXIS)
+    draw.text((px(0.0), bottom + 3), "0", fill=TEXT, font=_font(11), anchor="mt")
     return panel
 
 
 def render_watch_frame(sim: HighwaySimulator, env_index: int, observation: dict, action_values: np.ndarray,
                        action: int | None, caption: str | None = None, hgm_limit: float | None = None,
-                       **top_down_kwargs) -> np.ndarray:
+                       hgm_window: GridGeometry | None = None, **top_down_kwargs) -> np.ndarray:
     """One frame of a learned host driving: top row the network's inputs (the newest camera frame
     and HGM of its stacks) and its Q-values with the chosen action; below, the top-down view.
 
     `observation`: the stacked observations the network read (`camera`, `hgm` uint8 [N, 3F, H, W],
-    only the streams the model has); `action_values`: its Q-values [5] for env `env_index`.
+    only the streams the model has); `action_values`: its Q-values [5] for env `env_index`;
+    `hgm_window`: the HGM's extent around the host (`hyper_grid_matrix.hgm_geometry`), needed to draw it
+    in metres.
     """
     top = render_top_down(sim, env_index, action=action, caption=caption, **top_down_kwargs)
     panels: list[Image.Image] = []
@@ -249,17 +346,17 @@ def render_watch_frame(sim: HighwaySimulator, env_index: int, observation: dict,
         camera = observation["camera"][env_index, -3:].permute(1, 2, 0).cpu().numpy()
         panels.append(_titled(camera, f"camera {camera.shape[0]}x{camera.shape[1]} (input)", (PANEL, PANEL)))
     if "hgm" in observation:
-        from ..observations import decode_hgm
-
+        if hgm_window is None:
+            raise ValueError("render_watch_frame needs hgm_window (hgm_geometry of the observation config) "
+                             "to draw the HGM in metres")
         values = decode_hgm(observation["hgm"][env_index, -3]).cpu().numpy()
         limit = hgm_limit if hgm_limit is not None else hgm_colour_limit(sim.config)
-        panels.append(_titled(hgm_picture(values, limit), f"HGM {values.shape[0]}x{values.shape[1]} (input)",
-                              (PANEL, PANEL)))
+        panels.append(hgm_panel(values, hgm_window, sim, env_index, limit, (HGM_PANEL_W, PANEL + TITLE_H)))
     gap = 4
     width = top.shape[1]
     used = sum(p.width + gap for p in panels)
-    panels.append(_action_values_panel(np.asarray(action_values, dtype=np.float64), action,
-                                       (max(width - used, 260), PANEL + TITLE_H)))
+    panels.append(action_values_panel(np.asarray(action_values, dtype=np.float64), action,
+                                      (max(width - used, 260), PANEL + TITLE_H)))
     row_w = sum(p.width for p in panels) + gap * (len(panels) - 1)
     frame = Image.new("RGB", (max(row_w, width), PANEL + TITLE_H + gap + top.shape[0]), PANEL_BG)
     x = 0

@@ -18,6 +18,7 @@ from ..contracts.schema import JobConfig
 from ..envs.render import render_watch_frame
 from ..envs.video import record_episode
 from ..observations import ObservationBuilder
+from ..observations.hyper_grid_matrix import hgm_geometry
 from ..simulator import HighwaySimulator
 from .policies import attached_driver, trained_network
 
@@ -46,8 +47,10 @@ class GreedyPolicy:
 
     def render(self, sim: HighwaySimulator, env_index: int, action: int | None, caption: str | None) -> np.ndarray:
         """The frame of the state the policy just decided in (`record_episode`'s `render`)."""
+        c = self.builder.cfg
+        window = hgm_geometry(sim, c.height, c.width, c.v2x_range, c.hgm_ahead)
         return render_watch_frame(sim, env_index, self.observation, self.action_values[env_index].cpu().numpy(),
-                                  action, caption)
+                                  action, caption, hgm_window=window)
 
 
 def record_gif(job: JobConfig, checkpoint: Path | None, path: Path, seed: int | None = None,
