@@ -9,6 +9,9 @@ dtypes, so the manifest records each column's dtype and `load_bundle` restores i
 ints, scenarios stay text, floats round-trip exactly). Two things are not kept: a frame's index
 (`StoreData` frames carry a plain range index) and the difference between a missing text value
 and an empty one in a column that may hold missing values (both read back as missing).
+
+A bundle written before evals.csv had its `experiment` column gets the column on loading, derived
+from its runs.csv the way `load_store` derives it (`analysis.load.with_experiment`).
 """
 
 from __future__ import annotations
@@ -31,8 +34,9 @@ CONFIG_DIR = "configs"
 
 # StoreData table -> (file, what it holds). The order is the order `--help` lists them in.
 TABLE_FILES: dict[str, tuple[str, str]] = {
-    "evals": ("evals.csv", "per-run test means, one row per model x scenario x seed: run_id, model, scenario, "
-                           f"seed, train_key, git_commit, {', '.join(REPORTED_METRICS)}, n_episodes"),
+    "evals": ("evals.csv", "per-run test means, one row per model x scenario x seed x experiment preset: run_id, "
+                           "model, scenario, seed, experiment (the run's experiment.name, else its preset tag, else "
+                           f"'unknown'), train_key, git_commit, {', '.join(REPORTED_METRICS)}, n_episodes"),
     "episodes": ("episodes.csv", "per-episode test metrics: run_id, model, scenario, seed, episode, "
                                  "the eval metrics of each episode"),
     "curves": ("curves.csv", "training curves, long: run_id, model, seed, train_key, metric, step, value"),

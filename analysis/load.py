@@ -21,6 +21,12 @@ from hgm_repro.contracts.names import REPORTED_METRICS as EVAL_METRICS  # after 
 from hgm_repro.contracts.names import RUN_TAGS as TAG_COLUMNS
 from hgm_repro.contracts.names import current_key
 
+# The experiment preset a run was made with (`quick`, `paper_steps`, ...): its resolved `experiment.name`,
+# else the `preset` tag every run of the app carries, else this.
+EXPERIMENT_PARAM = "params.experiment.name"
+PRESET_TAG = "preset"
+UNKNOWN_EXPERIMENT = "unknown"
+
 
 class EmptyStoreError(RuntimeError):
     """The store holds no experiment of that name, or no run of it carries a `stage` tag."""
@@ -40,6 +46,10 @@ class StoreData:
     dropped: list[str] = field(default_factory=list)  # why runs were left out (duplicates, failures)
     source: str = ""  # how the report names where the data came from; "" = the tracking store
 
+    def __post_init__(self) -> None:
+        # Every source gets the evals' `experiment` column the same way, older bundles included.
+        self.evals = with_experiment(self.evals, self.runs)
+
     @property
     def git_dirty(self) -> str:
         """'true', 'false', 'mixed', or '' when the runs did not record it."""
@@ -50,6 +60,51 @@ class StoreData:
     def git_commits(self) -> list[str]:
         commits = self.runs.get("git_commit", pd.Series(dtype=str)).dropna().astype(str)
         return sorted(c for c in commits.unique() if c)
+
+
+def run_experiments(runs: pd.DataFrame) -> pd.Series:
+    """The experiment preset of each run, indexed like `runs`: its `experiment.name` param, else its `preset`
+    tag, else 'unknown'."""
+    out = pd.Series(UNKNOWN_EXPERIMENT, index=runs.index, dtype=object)
+    for column in (PRESET_TAG, EXPERIMENT_PARAM):  # the param, read last, wins
+        if column in runs:
+            values = runs[column]
+            given = values.notna() & values.astype(str).str.strip().ne("")
+            out[given] = values[given].astype(str)
+    return out
+
+
+def with_experiment(evals: pd.DataFrame, runs: pd.DataFrame) -> pd.DataFrame:
+    """`evals` with an `experiment` column (after `seed`): each row's preset, from its run in `runs`; a row
+    that already names one keeps it."""
+    if "run_id" in runs and "run_id" in evals and not runs.empty:
+        by_run = pd.Series(run_experiments(runs).to_numpy(), index=runs["run_id"].astype(str))
+        by_run = by_run[~by_run.index.duplicated()]
+        derived = evals["run_id"].astype(str).map(by_run).fillna(UNKNOWN_EXPERIMENT)
+    else:
+        derived = pd.Series(UNKNOWN_EXPERIMENT, index=evals.index, dtype=object)
+    if "experiment" in evals:
+        known = evals["experiment"].notna() & evals["experiment"].astype(str).ne("")
+        if known.all():
+            return evals
+        evals = evals.copy()
+        evals["experiment"] = evals["experiment"].where(known, derived).astype(str)
+        return evals
+    evals = evals.copy()
+    at = list(evals.columns).index("seed") + 1 if "seed" in evals else len(evals.columns)
+    evals.insert(at, "experiment", derived.astype(str).to_numpy())
+    return evals
+
+
+def main_experiments(evals: pd.DataFrame) -> dict[str, str]:
+    """Per model, the experiment its runs on the report's main pages come from: of the model's own
+    experiments, the one most evaluation runs of the whole store were made with (ties: by name). A model
+    run at several presets (the rungs of the scale ladder) is thus never pooled across them."""
+    if evals.empty or "experiment" not in evals:
+        return {}
+    counts = evals["experiment"].astype(str).value_counts()
+    return {str(model): sorted(set(group.astype(str)), key=lambda e: (-counts[e], e))[0]
+            for model, group in evals.groupby("model")["experiment"]}
 
 
 def default_tracking_uri() -> str:
@@ -79,7 +134,7 @@ def _runs_frame(client: MlflowClient, experiment_id: str) -> pd.DataFrame:
                 "start_time": run.info.start_time or 0,
                 "parent_run_id": tags.get("mlflow.parentRunId"),
             }
-            for tag in TAG_COLUMNS:
+            for tag in (*TAG_COLUMNS, PRESET_TAG):
                 row[tag] = tags.get(tag)
             row.update({f"params.{current_key(k)}": v for k, v in run.data.params.items()})  # old names too
             row.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})
@@ -162,7 +217,14 @@ def _download_text(client: MlflowClient, run_id: str, name: str, tmp: Path) -> s
 def _evals_and_episodes(client: MlflowClient, eval_runs: pd.DataFrame,
                         tmp: Path) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, str]]:
     eval_rows, episode_frames, configs = [], [], {}
-    for run in eval_runs.to_dict("records"):
+    # Each model's printed config comes from a run of its main experiment: the runs of that one are read first.
+    experiments = run_experiments(eval_runs)
+    main = main_experiments(pd.DataFrame({"model": eval_runs["model"], "experiment": experiments}))
+    first = [e == main.get(str(m)) for e, m in zip(experiments, eval_runs["model"], strict=True)]
+    order = sorted(range(len(eval_runs)), key=lambda i: not first[i])
+    records = eval_runs.to_dict("records")
+    for i in order:
+        run = records[i]
         row = {k: run.get(k) for k in ("run_id", "model", "scenario", "seed", "train_key", "git_commit")}
         for metric in EVAL_METRICS:
             value = run.get(f"metrics.eval/{metric}")
@@ -188,12 +250,15 @@ def _evals_and_episodes(client: MlflowClient, eval_runs: pd.DataFrame,
                                                   if c in episodes])
                 for key in ("seed", "scenario", "model", "run_id"):
                     episodes.insert(0, key, row[key])
-                episode_frames.append(episodes)
+                episode_frames.append((i, episodes))
         if str(run["model"]) not in configs and "config.yaml" in artifacts:
             text = _download_text(client, run_id, "config.yaml", tmp / run_id)
             if text:
                 configs[str(run["model"])] = text
-        eval_rows.append(row)
+        eval_rows.append((i, row))
+    # Back in the runs' order: the reading order only chose the configs.
+    eval_rows = [row for _, row in sorted(eval_rows, key=lambda pair: pair[0])]
+    episode_frames = [frame for _, frame in sorted(episode_frames, key=lambda pair: pair[0])]
     evals = pd.DataFrame(eval_rows, columns=["run_id", "model", "scenario", "seed", "train_key", "git_commit",
                                              *EVAL_METRICS, "n_episodes"])
     episodes = pd.concat(episode_frames, ignore_index=True) if episode_frames else pd.DataFrame(
@@ -224,8 +289,12 @@ def load_store(tracking_uri: str | None = None, experiment: str = "hgm_repro") -
     bad = runs["status"].isin(["FAILED", "KILLED"])
     dropped = [f"{int(bad.sum())} FAILED/KILLED run(s) left out"] if bad.any() else []
     runs = runs[~bad]
-    train, notes_t = _keep_latest(runs[runs["stage"] == "train"], ["model", "seed"], "train")
-    evals_runs, notes_e = _keep_latest(runs[runs["stage"] == "eval"], ["model", "scenario", "seed"], "eval")
+    # A model trained and tested at several presets keeps one run per cell of each.
+    runs = runs.assign(experiment=run_experiments(runs))
+    train, notes_t = _keep_latest(runs[runs["stage"] == "train"], ["model", "seed", "experiment"], "train")
+    evals_runs, notes_e = _keep_latest(runs[runs["stage"] == "eval"], ["model", "scenario", "seed", "experiment"],
+                                       "eval")
+    train, evals_runs = train.drop(columns="experiment"), evals_runs.drop(columns="experiment")
     dropped += notes_t + notes_e
     with tempfile.TemporaryDirectory(prefix="hgm_analysis_") as tmp:
         evals, episodes, configs = _evals_and_episodes(client, evals_runs, Path(tmp))

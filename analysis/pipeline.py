@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from analysis import crashes, equal_terms, tables
+from analysis import crashes, equal_terms, ladder, tables
 from analysis.claims import claims_table, evaluate_claims
 from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
@@ -207,6 +207,10 @@ def _config_runs(configs: dict[str, str]) -> dict[str, str]:
 def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outputs:
     """Everything `python -m analysis` writes, from one loaded store."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    # The ladder reads every preset's runs; every other page one preset per model.
+    ladder_section, ladder_numbers, ladder_verdicts = ladder.section(with_cv_ratio(data.evals, data.runs),
+                                                                     data.curves, data.episodes)
+    data = ladder.main_view(data)
     evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)
     pictures_note = None
@@ -247,7 +251,11 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         figures["crash_anatomy"] = crash_figure
     if not crash_table.empty:
         csvs.append(out_dir / "crash_anatomy.csv")
-    sections = [s for s in (equal_terms.section(evals, data.curves, results), crash_section) if s is not None]
+    for name, frame in (("scale_ladder.csv", ladder_numbers), ("scale_ladder_claims.csv", ladder_verdicts)):
+        frame.to_csv(out_dir / name, index=False, float_format="%.6g")
+        csvs.append(out_dir / name)
+    sections = [s for s in (ladder_section, equal_terms.section(evals, data.curves, results), crash_section)
+                if s is not None]
 
     configs, configs_note = config_differences(data.configs)
     inputs = ReportInputs(

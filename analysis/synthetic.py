@@ -51,6 +51,7 @@ class SyntheticSpec:
     log_points: int = 40
     episodes: int = 4
     rng_seed: int = 7
+    experiment: str = "synthetic"  # the preset the runs name (`experiment.name`): a rung of the scale ladder, say
 
 
 def synthetic_frames(spec: SyntheticSpec) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame]:
@@ -72,7 +73,7 @@ def synthetic_frames(spec: SyntheticSpec) -> tuple[pd.DataFrame, pd.DataFrame, p
                     "dangerous_actions": 1.0,
                 }
                 means["distance_m"] = means["avg_speed_kmh"] / 3.6 * 120.0
-                run_id = f"{model}-{scenario}-{seed}"
+                run_id = f"{spec.experiment}-{model}-{scenario}-{seed}"
                 eps = {}
                 for metric, mean in means.items():
                     noise = seed_effect + rng.normal(0.0, spec.noise, size=spec.episodes) * 0.5
@@ -81,7 +82,8 @@ def synthetic_frames(spec: SyntheticSpec) -> tuple[pd.DataFrame, pd.DataFrame, p
                     episode_rows.append({"run_id": run_id, "model": model, "scenario": scenario, "seed": seed,
                                          "episode": i, **{m: float(v[i]) for m, v in eps.items()}})
                 eval_rows.append({"run_id": run_id, "model": model, "scenario": scenario, "seed": seed,
-                                  "train_key": f"tk-{model}", "git_commit": "abc1234",
+                                  "experiment": spec.experiment, "train_key": _train_key(spec, model),
+                                  "git_commit": "abc1234",
                                   **{m: float(np.mean(v)) for m, v in eps.items()}, "n_episodes": spec.episodes})
             if model in spec.tau:
                 curve_frames.append(_curves(spec, model, seed, rng))
@@ -90,6 +92,11 @@ def synthetic_frames(spec: SyntheticSpec) -> tuple[pd.DataFrame, pd.DataFrame, p
     curves = pd.concat(curve_frames, ignore_index=True) if curve_frames else pd.DataFrame(
         columns=["run_id", "model", "seed", "train_key", "metric", "step", "value"])
     return evals, curves, episodes
+
+
+def _train_key(spec: SyntheticSpec, model: str) -> str:
+    # One training config per model and preset, as the app's train_key is.
+    return f"tk-{model}" if spec.experiment == SyntheticSpec.experiment else f"tk-{model}-{spec.experiment}"
 
 
 def _curves(spec: SyntheticSpec, model: str, seed: int, rng: np.random.Generator) -> pd.DataFrame:
@@ -109,8 +116,9 @@ def _curves(spec: SyntheticSpec, model: str, seed: int, rng: np.random.Generator
         "epsilon": np.maximum(0.1, 1.0 - 0.9 * t),
         "steps_per_s": 400.0 + jitter(5.0),
     }
-    return pd.concat([pd.DataFrame({"run_id": f"{model}-train-{seed}", "model": model, "seed": seed,
-                                    "train_key": f"tk-{model}", "metric": metric, "step": steps, "value": v})
+    return pd.concat([pd.DataFrame({"run_id": f"{spec.experiment}-{model}-train-{seed}", "model": model,
+                                    "seed": seed, "train_key": _train_key(spec, model), "metric": metric,
+                                    "step": steps, "value": v})
                       for metric, v in values.items()], ignore_index=True)
 
 
@@ -134,11 +142,11 @@ def write_store(root: Path, spec: SyntheticSpec | None = None, experiment: str =
     config_text = "simulator:\n  lanes: 5\n  v_min_kmh: 40.0\nlearner:\n  lr: 0.0025\n"
     params = [Param("simulator.lanes", "5"), Param("simulator.v_min_kmh", "40.0"),
               Param("simulator.vehicle_types.CHV.a_lon", "2.0"), Param("simulator.vehicle_types.AHV.a_lon", "4.0"),
-              Param("learner.lr", "0.0025"), Param("experiment.name", "synthetic")]
+              Param("learner.lr", "0.0025")]
 
     def tags(model: str, scenario: str, seed: int, stage: str) -> dict[str, str]:
         t = {"model": model, "scenario": scenario, "seed": str(seed), "stage": stage,
-             "train_key": f"tk-{model}", "git_commit": "abc1234"}
+             "train_key": _train_key(spec, model), "git_commit": "abc1234", "preset": spec.experiment}
         if parent:
             t["mlflow.parentRunId"] = parent
         return t
@@ -151,8 +159,10 @@ def write_store(root: Path, spec: SyntheticSpec | None = None, experiment: str =
     for row in evals.itertuples(index=False):
         run_id = client.create_run(exp_id, tags=tags(row.model, row.scenario, int(row.seed), "eval")).info.run_id
         metrics = [Metric(f"eval/{m}", float(getattr(row, m)), 0, 0) for m in EPISODE_COLUMNS]
-        _log_batches(client, run_id, metrics, [Param("model.name", row.model)] +
-                     (params if row.model in LEARNED else []))
+        # Every evaluation run resolves its preset, the non-learning hosts' too; the training runs log only what
+        # identifies a training, which holds no preset name.
+        own = [Param("model.name", row.model), Param("experiment.name", row.experiment)]
+        _log_batches(client, run_id, metrics, own + (params if row.model in LEARNED else []))
         eps = episodes[episodes["run_id"] == row.run_id][list(EPISODE_COLUMNS)]
         client.log_text(run_id, eps.to_csv(index=False), "episodes.csv")
         client.log_text(run_id, config_text + f"model:\n  name: {row.model}\n", "config.yaml")

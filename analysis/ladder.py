@@ -1,0 +1,204 @@
+"""The scale ladder: the same comparison at each rung of the paper's scale that this CPU can reach.
+
+A rung is an experiment preset (the evaluation runs' `experiment.name`, evals' `experiment` column). Its
+learned hosts were trained and tested with that preset; the human-driven host does not train, so its runs
+(the same seeds in the same scenarios, hence the same test traffic) stand beside every rung. Each rung is
+judged on its own runs alone: the scenario-3 return and collisions, the seeds that beat the human-driven
+host, and each of the paper's claims by the claims section's rule. Only the paper's three methods climb the
+ladder; a variant (the enriched HGM, a guarded host) is left out.
+
+The report's other pages read one preset per model (`analysis.load.main_experiments`); `main_view` cuts a
+store down to that, so that the rungs of one model are never pooled as if they were more seeds.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pandas as pd
+
+from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
+from analysis.labels import LEARNED, METRIC_LABELS, model_label
+from analysis.load import StoreData, main_experiments
+from analysis.report import fmt_estimate
+from analysis.sections import Section
+from analysis.tables import HEADLINE_METRICS, HEADLINE_SCENARIO, SAFE_COLLISIONS, beating_grid, headline, seeds_beating
+
+TITLE = "Scale ladder"
+# The rungs, lowest first: each preset and what it keeps of the paper's scale (conf/experiment/*.yaml).
+RUNGS = {
+    "quick": "CPU preset (80k steps, 36x36x2)",
+    "paper_steps": "the paper's steps (1M steps, Table 4's learner, 36x36x2)",
+    "paper_pixels": "the paper's pixels (160k steps, 84x84x4)",
+}
+REFERENCE = "human"  # does not train: its runs stand beside every rung
+SCENARIOS = [HEADLINE_SCENARIO]  # the training traffic's mix
+NOT_RUN = "not run"
+
+
+@dataclasses.dataclass
+class Rung:
+    """One rung's runs: the learned methods' of its preset, the human-driven host's, and their curves."""
+
+    name: str
+    label: str
+    evals: pd.DataFrame
+    curves: pd.DataFrame
+    episodes: pd.DataFrame
+
+    @property
+    def ran(self) -> bool:
+        return bool(self.evals["model"].isin(LEARNED).any())
+
+    def claims(self) -> list[ClaimResult]:
+        return evaluate_claims(self.evals, self.curves)
+
+
+def _reference_rows(evals: pd.DataFrame, rung: str) -> pd.DataFrame:
+    """The human-driven host's runs for `rung`: its own runs at that preset if it has any, else those of its
+    main experiment (one run per seed and scenario either way)."""
+    rows = evals[evals["model"] == REFERENCE]
+    if rows.empty or rung in set(rows["experiment"]):
+        return rows[rows["experiment"] == rung]
+    return rows[rows["experiment"] == main_experiments(rows)[REFERENCE]]
+
+
+def rung(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame, name: str) -> Rung:
+    """The runs of rung `name` (evals with the `experiment` column; curves and episodes as `StoreData` holds
+    them): the learned methods' training curves are those of the trainings its evaluation runs tested."""
+    learned = evals[evals["model"].isin(LEARNED) & (evals["experiment"] == name)]
+    rows = pd.concat([learned, _reference_rows(evals, name)], ignore_index=True)
+    keys = set(learned["train_key"].dropna())
+    rung_curves = curves[curves["model"].isin(LEARNED) & curves["train_key"].isin(keys)] if not curves.empty \
+        else curves
+    rung_episodes = episodes[episodes["run_id"].isin(set(rows["run_id"]))] if "run_id" in episodes else episodes
+    return Rung(name, RUNGS.get(name, name), rows, rung_curves.reset_index(drop=True),
+                rung_episodes.reset_index(drop=True))
+
+
+def rungs(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame) -> list[Rung]:
+    """Every rung of the ladder, lowest first, run or not."""
+    return [rung(evals, curves, episodes, name) for name in RUNGS]
+
+
+def method_rows(r: Rung) -> pd.DataFrame:
+    """One row per method of the rung and the human-driven host: seeds, the scenario-3 return and collisions
+    per episode (mean over seeds, 95 % t interval over seeds) and the seeds beating the human-driven host
+    (`paired_seeds` tested beside it, `beating` of them, `beating_text` as the seed-by-seed table words it)."""
+    table = headline(r.evals, SCENARIOS) if not r.evals.empty else pd.DataFrame(columns=["model"])
+    beating = seeds_beating(r.evals, REFERENCE, SCENARIOS, episodes=r.episodes)
+    counts = beating.set_index("model")
+    words = beating_grid(beating, SCENARIOS)[HEADLINE_SCENARIO] if not beating.empty else pd.Series(dtype=str)
+    out = []
+    for model in (*LEARNED, REFERENCE):
+        row: dict[str, object] = {"rung": r.name, "model": model}
+        found = table[table["model"] == model]
+        for metric in HEADLINE_METRICS:
+            for part in ("point", "low", "high", "n"):
+                value = found.iloc[0][f"{metric}/scenario/{part}"] if not found.empty else float("nan")
+                row[f"{metric}/{part}"] = value
+        n = row[f"{HEADLINE_METRICS[0]}/n"]
+        row["seeds"] = 0 if pd.isna(n) else int(n)
+        row["paired_seeds"] = int(counts.loc[model, "seeds"]) if model in counts.index else 0
+        row["beating"] = int(counts.loc[model, "beating"]) if model in counts.index else 0
+        row["beating_text"] = _beating_text(model, row, words)
+        out.append(row)
+    return pd.DataFrame(out)
+
+
+def _cell(row: pd.Series, metric: str) -> str:
+    if not row["seeds"]:
+        return NOT_RUN
+    return fmt_estimate(row[f"{metric}/point"], row[f"{metric}/low"], row[f"{metric}/high"], int(row["seeds"]),
+                        metric)
+
+
+def _beating_text(model: str, row: dict[str, object], words: pd.Series) -> str:
+    if model == REFERENCE:
+        return "the reference" if row["seeds"] else "no runs: nothing to pair with"
+    if not row["seeds"]:
+        return NOT_RUN
+    if not row["paired_seeds"]:
+        return "no human-driven run on these seeds"
+    return str(words[model])
+
+
+def _table(r: Rung) -> list[list[str]]:
+    head = ["Method", "Seeds", f"Return, scenario {HEADLINE_SCENARIO}",
+            f"{METRIC_LABELS['collisions']}, scenario {HEADLINE_SCENARIO}",
+            f"Seeds beating the human-driven host, scenario {HEADLINE_SCENARIO}"]
+    rows = [head]
+    for _, row in method_rows(r).iterrows():
+        name = model_label(row["model"], short=True) + (" (every rung)" if row["model"] == REFERENCE else "")
+        rows.append([name, str(row["seeds"]), _cell(row, "episode_return"), _cell(row, "collisions"),
+                     row["beating_text"]])
+    return rows
+
+
+def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
+    """Claim x rung: each claim's verdict on the rung's runs alone, or 'not run'."""
+    columns = {r.name: ({c.number: c.verdict for c in r.claims()} if r.ran else dict.fromkeys(CLAIMS, NOT_RUN))
+               for r in ladder}
+    return pd.DataFrame(columns, index=pd.Index(list(CLAIMS), name="claim"))
+
+
+def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame) -> tuple[Section, pd.DataFrame,
+                                                                                           pd.DataFrame]:
+    """The ladder as a report section, with its numbers (rung x method) and verdicts (claim x rung) as tables
+    for CSV files."""
+    ladder = rungs(evals, curves, episodes)
+    out = Section(TITLE)
+    out.para("The same comparison at each rung of the paper's scale within this CPU's reach, lowest first. A "
+             "rung is an experiment preset: its learned hosts were trained and tested with it. The human-driven "
+             "host does not train, so its runs (the same seeds in the same scenarios, hence the same test traffic) "
+             "stand beside every rung. Only the paper's three methods are on the ladder: the variants (the "
+             "enriched HGM, the guarded hosts) are left out. Return and collisions: per test episode in scenario "
+             f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds]. A "
+             f"seed beats the human-driven host when its return is higher on the same seed and scenario with under "
+             f"{SAFE_COLLISIONS:g} collisions per episode.")
+    for i, r in enumerate(ladder, start=1):
+        if not r.ran:
+            out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}.")
+            continue
+        out.para(f"Rung {i}, {r.name}: {r.label}.")
+        out.table(_table(r), widths=[1.5, 0.5, 1.4, 1.4, 1.7])
+    verdicts = claim_verdicts(ladder)
+    out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
+             "claims read the training curves of the networks the rung tested).")
+    out.table([["Claim", *[f"{r.name}" for r in ladder]],
+               *[[f"{n}. {CLAIMS[n]}", *[str(verdicts.loc[n, r.name]) for r in ladder]] for n in verdicts.index]],
+              widths=[3.4, *[1.0] * len(ladder)])
+    numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
+    return out, numbers, verdicts.reset_index()
+
+
+def main_view(data: StoreData) -> StoreData:
+    """`data` cut to each model's main experiment (the report's pages other than the ladder), with a note per
+    model whose other presets' runs only the ladder page reads."""
+    evals = data.evals
+    main = main_experiments(evals)
+    if all(len(set(g)) <= 1 for _, g in evals.groupby("model")["experiment"]):
+        return data
+    kept = evals[[main.get(str(m)) == e for m, e in zip(evals["model"], evals["experiment"], strict=True)]]
+    notes = []
+    for model, group in evals[~evals.index.isin(kept.index)].groupby("model"):
+        others = ", ".join(f"{e} ({n} evaluation runs)" for e, n in group["experiment"].value_counts().sort_index()
+                           .items())
+        notes.append(f"{model_label(str(model), short=True)}: its runs of {others} are read by the scale-ladder "
+                     f"page only; the other pages read its {main[str(model)]} runs.")
+    keys = set(kept["train_key"].dropna())
+    tested = set(evals["model"])
+
+    def trained_here(frame: pd.DataFrame) -> pd.Series:
+        # A training belongs to the main pages when one of their evaluation runs tested it.
+        return frame["train_key"].isin(keys) | ~frame["model"].isin(tested)
+
+    runs = data.runs
+    is_eval = runs["stage"] == "eval"
+    runs = runs[(is_eval & runs["run_id"].isin(set(kept["run_id"]))) | (~is_eval & trained_here(runs))]
+    curves = data.curves[trained_here(data.curves)] if not data.curves.empty else data.curves
+    episodes = data.episodes[data.episodes["run_id"].isin(set(kept["run_id"]))] if "run_id" in data.episodes \
+        else data.episodes
+    return dataclasses.replace(data, evals=kept.reset_index(drop=True), runs=runs.reset_index(drop=True),
+                               curves=curves.reset_index(drop=True), episodes=episodes.reset_index(drop=True),
+                               dropped=[*data.dropped, *notes])

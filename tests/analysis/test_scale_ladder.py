@@ -1,0 +1,169 @@
+"""The evals' `experiment` column (store, bundle, older bundles) and the report's scale-ladder page: two rungs run,
+one not, each rung judged on its own runs beside the shared human-driven host."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from analysis import ladder
+from analysis.bundle import MANIFEST, load_bundle, write_bundle
+from analysis.claims import SUPPORTED, evaluate_claims
+from analysis.labels import LEARNED
+from analysis.load import StoreData, load_store
+from analysis.pipeline import build_outputs
+from analysis.report import fmt_estimate
+from analysis.scenarios import with_cv_ratio
+from analysis.stats import mean_ci
+from analysis.synthetic import SyntheticSpec, synthetic_frames, write_store
+from tests.helpers import pdf_text
+
+SEEDS = (0, 1, 2)
+
+
+def frames(experiment: str, models: tuple[str, ...], **effects: dict[str, float]) -> tuple[pd.DataFrame, ...]:
+    spec = SyntheticSpec(seeds=SEEDS, models=models, episodes=2, experiment=experiment, rng_seed=len(experiment))
+    for name, values in effects.items():
+        setattr(spec, name, {**getattr(spec, name), **values})
+    return synthetic_frames(spec)
+
+
+def runs_of(evals: pd.DataFrame, curves: pd.DataFrame) -> pd.DataFrame:
+    """Evaluation runs naming their preset as the app logs it; training runs name none."""
+    train = curves.drop_duplicates("run_id")[["run_id", "model", "seed", "train_key"]].assign(stage="train")
+    tested = evals[["run_id", "model", "scenario", "seed", "train_key"]].assign(
+        stage="eval", **{"params.experiment.name": evals["experiment"]})
+    return pd.concat([train, tested], ignore_index=True).assign(status="FINISHED", git_commit="abc1234")
+
+
+def two_rungs() -> StoreData:
+    """The quick rung (the paper's three methods, the human-driven host and a variant) and the paper's-steps
+    rung, at which Coordinate scores above proposed: claim 7 turns from supported to not supported."""
+    parts = [frames("quick", (*LEARNED, "human")), frames("quick160", ("proposed_enriched",)),
+             frames("paper_steps", LEARNED, return_base={"coordinate": 2000.0})]
+    # (The variant has no training curves: an empty frame in the concat would turn the steps into objects.)
+    evals, curves, episodes = (pd.concat([p[i] for p in parts if not p[i].empty], ignore_index=True)
+                               for i in range(3))
+    return StoreData(tracking_uri="sqlite:////ladder/mlflow.db", experiment="hgm_repro", runs=runs_of(evals, curves),
+                     curves=curves, evals=evals.drop(columns="experiment"), episodes=episodes)
+
+
+def test_every_eval_row_names_its_preset_and_a_bundle_keeps_it(tmp_path: Path) -> None:
+    data = two_rungs()  # built without the column: it is derived from the runs' experiment.name
+    assert list(data.evals.columns[:5]) == ["run_id", "model", "scenario", "seed", "experiment"]
+    by_model = data.evals.groupby("model")["experiment"].agg(lambda s: sorted(set(s)))
+    assert by_model.to_dict() == {"proposed": ["paper_steps", "quick"], "min": ["paper_steps", "quick"],
+                                  "coordinate": ["paper_steps", "quick"], "human": ["quick"],
+                                  "proposed_enriched": ["quick160"]}
+    write_bundle(data, tmp_path / "bundle")
+    assert "experiment" in pd.read_csv(tmp_path / "bundle" / "evals.csv").columns
+    again = load_bundle(tmp_path / "bundle")
+    pd.testing.assert_frame_equal(again.evals, data.evals, check_exact=True)
+
+
+def test_an_older_bundle_gets_the_column_from_its_runs(tmp_path: Path) -> None:
+    data = two_rungs()
+    runs = data.runs.copy()
+    first = runs.index[runs["model"].eq("human") & runs["stage"].eq("eval")]
+    runs.loc[first[0], "params.experiment.name"] = None
+    runs["preset"] = None
+    runs.loc[first[0], "preset"] = "quick_by_tag"  # no param: the preset tag says it
+    runs.loc[first[1], "params.experiment.name"] = None  # neither
+    write_bundle(StoreData(tracking_uri=data.tracking_uri, experiment=data.experiment, runs=runs,
+                           curves=data.curves, evals=data.evals, episodes=data.episodes), tmp_path / "old")
+    # The bundle as written before evals.csv had the column.
+    evals_csv = tmp_path / "old" / "evals.csv"
+    pd.read_csv(evals_csv, dtype=str, keep_default_na=False).drop(columns="experiment").to_csv(evals_csv, index=False)
+    manifest = json.loads((tmp_path / "old" / MANIFEST).read_text())
+    del manifest["tables"]["evals"]["columns"]["experiment"]
+    (tmp_path / "old" / MANIFEST).write_text(json.dumps(manifest))
+    old = load_bundle(tmp_path / "old").evals.set_index("run_id")["experiment"]
+    expected = data.evals.set_index("run_id")["experiment"].copy()
+    expected[runs.loc[first[0], "run_id"]] = "quick_by_tag"
+    expected[runs.loc[first[1], "run_id"]] = "unknown"
+    pd.testing.assert_series_equal(old, expected)
+
+
+def test_a_store_keeps_each_presets_runs_of_one_model(tmp_path: Path) -> None:
+    small = {"seeds": (0, 1), "scenarios": ("3",), "episodes": 2}
+    uri = write_store(tmp_path, SyntheticSpec(models=("proposed", "human"), experiment="quick", **small))
+    write_store(tmp_path, SyntheticSpec(models=("proposed",), experiment="paper_steps", **small), with_parent=False)
+    data = load_store(uri)
+    counts = data.evals.groupby(["model", "experiment"]).size().to_dict()
+    assert counts == {("proposed", "quick"): 2, ("proposed", "paper_steps"): 2, ("human", "quick"): 2}
+    assert not data.dropped  # two presets of one cell are not duplicates
+    assert set(data.curves["train_key"]) == {"tk-proposed-quick", "tk-proposed-paper_steps"}
+
+
+def cell(evals: pd.DataFrame, model: str, experiment: str, metric: str) -> str:
+    rows = evals[(evals["model"] == model) & (evals["experiment"] == experiment) & (evals["scenario"] == "3")]
+    e = mean_ci(rows[metric].to_numpy(float))
+    return fmt_estimate(e.point, e.low, e.high, e.n, metric)
+
+
+def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -> None:
+    data = two_rungs()
+    evals = with_cv_ratio(data.evals, data.runs)
+    section, numbers, verdicts = ladder.section(evals, data.curves, data.episodes)
+    tables = [b.rows for b in section.blocks if b.rows is not None]
+    paras = [b.text for b in section.blocks if b.rows is None]
+    quick, steps, claims = tables
+    assert [row[0] for row in quick[1:]] == ["Proposed", "Min", "Coordinate", "Human (every rung)"]
+    for table, experiment in ((quick, "quick"), (steps, "paper_steps")):
+        for row, model in zip(table[1:4], LEARNED, strict=True):
+            assert row[1:4] == [str(len(SEEDS)), cell(evals, model, experiment, "episode_return"),
+                                cell(evals, model, experiment, "collisions")]
+        # The human-driven host's runs stand beside every rung, and every seed is paired with them.
+        assert table[4][2] == cell(evals, "human", "quick", "episode_return")
+        assert table[1][4].startswith(f"{len(SEEDS)} of {len(SEEDS)}")
+    assert "Variant" not in str(tables) and "enriched" not in "".join(r[0] for t in tables for r in t)
+    assert "Rung 3, paper_pixels: the paper's pixels (160k steps, 84x84x4): not run." in paras
+    assert "Rung 2, paper_steps: the paper's steps (1M steps, Table 4's learner, 36x36x2)." in paras
+    # Each rung's verdicts are evaluate_claims on that rung's runs alone.
+    for name in ("quick", "paper_steps"):
+        rung = ladder.rung(evals, data.curves, data.episodes, name)
+        assert set(rung.evals["experiment"]) == {name, "quick"}  # the human-driven host's runs are the quick ones
+        assert list(verdicts[name]) == [c.verdict for c in evaluate_claims(rung.evals, rung.curves)]
+    assert verdicts.loc[6, "quick"] == SUPPORTED and verdicts.loc[6, "paper_steps"] == "not supported"
+    assert list(verdicts["paper_pixels"]) == ["not run"] * 7
+    assert claims[0] == ["Claim", "quick", "paper_steps", "paper_pixels"] and claims[7][1:] == [
+        "supported", "not supported", "not run"]
+    assert set(numbers["rung"]) == set(ladder.RUNGS) and not numbers.loc[numbers["rung"] == "paper_pixels",
+                                                                         "ran"].any()
+
+
+def test_the_other_pages_read_one_preset_per_model(tmp_path: Path) -> None:
+    data = two_rungs()
+    main = ladder.main_view(data)
+    assert set(zip(main.evals["model"], main.evals["experiment"], strict=True)) == {
+        (m, "quick") for m in (*LEARNED, "human")} | {("proposed_enriched", "quick160")}
+    assert set(main.curves["train_key"]) == {f"tk-{m}-quick" for m in LEARNED}  # not the paper_steps trainings
+    assert set(main.episodes["run_id"]) == set(main.evals["run_id"])
+    assert any("paper_steps (15 evaluation runs) are read by the scale-ladder page only" in n for n in main.dropped)
+
+
+@pytest.fixture(scope="module")
+def ladder_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    root = tmp_path_factory.mktemp("ladder")
+    write_bundle(two_rungs(), root / "bundle")
+    build_outputs(load_bundle(root / "bundle"), root / "report", pictures=False)
+    return root / "report"
+
+
+def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None:
+    text = " ".join(pdf_text(ladder_report / "report.pdf").split())
+    markdown = (ladder_report / "results.md").read_text()
+    assert f"## {ladder.TITLE}" in markdown and ladder.TITLE in text
+    for where in (text, markdown):
+        assert "Rung 3, paper_pixels: the paper's pixels (160k steps, 84x84x4): not run." in where
+        assert "Rung 2, paper_steps: the paper's steps (1M steps, Table 4's learner, 36x36x2)." in where
+    assert "| 7. Coordinate scores below proposed: the HGM is what helps. | supported | not supported | not run |" \
+        in markdown
+    numbers = pd.read_csv(ladder_report / "scale_ladder.csv")
+    assert numbers.groupby("rung")["ran"].first().to_dict() == {"paper_pixels": False, "paper_steps": True,
+                                                                "quick": True}
+    # The main pages' claims read the quick runs only: claim 7 holds there as on the quick rung.
+    assert pd.read_csv(ladder_report / "claims.csv")["verdict"].iloc[6] == SUPPORTED
