@@ -27,8 +27,9 @@ def test_the_mix_comes_from_the_evaluation_runs_params():
 def test_runs_without_logged_mix_fall_back_to_table_5_and_claims_use_the_logged_share():
     assert scenario_mix(pd.DataFrame({"stage": ["eval"], "scenario": ["1"]})).empty
     assert cv_ratios(None) == PAPER_CV_RATIO
-    evals = pd.DataFrame({"model": ["proposed"] * 2, "scenario": ["1", "2"], "episode_return": [1.0, 2.0],
-                          "cv_ratio": [0.1, 0.3]})
+    # Per-seed values (each seed is one network tested in every scenario: comparisons pair them).
+    evals = pd.DataFrame({"model": ["proposed"] * 2, "scenario": ["1", "2"], "seed": [0, 0],
+                          "episode_return": [1.0, 2.0], "cv_ratio": [0.1, 0.3]})
     assert sorted(_by_cv(evals, "proposed")) == [0.1, 0.3]
 
 
