@@ -6,8 +6,10 @@ simulator holds every member's envs in contiguous blocks, each block drawing its
 member's own generator (`HighwaySimulator(seed=[...])`), so a member meets the same traffic alone or
 in any group; TorchRL's `Collector` steps it with every member's epsilon-greedy policy on its own
 block; each member (`member.py`) stores its transitions, learns from its own prioritized replay
-with its own `DQNLoss`, target rule, Adam and moving average, validates, logs and checkpoints. A solo
-run is a group of one, and a group of one gives exactly the solo run.
+with its own `DQNLoss`, target rule, Adam and moving average, validates, logs and checkpoints. The
+group's `Progress` (`progress.py`: env steps, updates, update credit) is what every member's
+checkpoint records and a resume starts from. A solo run is a group of one, and a group of one gives
+exactly the solo run.
 
 What a member of a larger group draws differently from its solo run is only the exploration and the
 replay sampling (the process's generator serves the members in turn); its traffic and its first
@@ -25,7 +27,6 @@ import time
 import warnings
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
@@ -41,8 +42,9 @@ from ..envs import make_env
 from ..models.builders import make_actor
 from .builders import make_policy
 from .grouped import check_group
-from .member import Log, Member, NonFiniteLossError, set_rng_state
+from .member import Log, Member, set_rng_state
 from .overlap import ActingCopies, Prefetcher
+from .progress import Progress
 
 logger = logging.getLogger(__name__)
 
@@ -73,8 +75,8 @@ def train_group(jobs: Sequence[JobConfig], checkpoint_dirs: Sequence[Path], logs
         if resume is not None and resume["finished"]:
             finals[k] = member.finished_path()
             continue
-        point = (0, 0, True) if resume is None else \
-            (int(resume["env_steps"]), int(resume["updates"]), resume["replay_buffer"] is not None)
+        progress = Progress.from_checkpoint(resume)
+        point = (progress.env_steps, progress.updates, resume is None or resume["replay_buffer"] is not None)
         waiting.setdefault(point, []).append(k)
     for ks in waiting.values():
         finals.update(zip(ks, _train_together([members[k] for k in ks]), strict=True))
@@ -118,11 +120,9 @@ def _train_together(members: list[Member]) -> list[Path]:
     # Round the total up to whole batches so that a fresh and a resumed run stop at the same step.
     total_steps = math.ceil(L.total_steps / n_envs) * n_envs
     warmup_steps = math.ceil(L.warmup_steps / n_envs) * n_envs
-    steps_done = int(resume0["env_steps"]) if resume0 else 0
-    updates_done = int(resume0["updates"]) if resume0 else 0
-    update_credit = float(resume0["update_credit"]) if resume0 else 0.0
-
     seeds = [m.job.seed for m in members]
+    progress = Progress.from_checkpoint(resume0, group=seeds if count > 1 else None)
+
     env = make_env(job0, job0.train_scenario, n_envs=count * n_envs, seed=seeds[0] if count == 1 else seeds)
     for k, member in enumerate(members):
         if count > 1:
@@ -145,119 +145,107 @@ def _train_together(members: list[Member]) -> list[Path]:
         [make_policy(make_actor(net).to(device), m.exploration) for net, m in zip(acting.acting, members, strict=True)]
     policy = policies[0] if count == 1 else MemberPolicies(policies, n_envs)
     collector = Collector(
-        env, policy, frames_per_batch=count * n_envs, total_frames=(total_steps - steps_done) * count,
-        init_random_frames=max(0, warmup_steps - steps_done) * count, device=device, storing_device=device,
+        env, policy, frames_per_batch=count * n_envs, total_frames=(total_steps - progress.env_steps) * count,
+        init_random_frames=max(0, warmup_steps - progress.env_steps) * count, device=device, storing_device=device,
         auto_register_policy_transforms=False)  # the Q-network is feed-forward: no InitTracker needed
-    group = seeds if count > 1 else None
-
-    def progress_state() -> dict[str, Any]:
-        return {"env_steps": steps_done, "updates": updates_done, "update_credit": update_credit, "group": group}
-
-    def stop(interrupted: JobInterrupted | None = None) -> None:
-        """A stop signal ends training between batches, never inside one: every member's last.pt
-        holds everything up to this batch (a resume loses nothing), then the signal is raised."""
-        for member in members:
-            member.save_last(finished=steps_done >= total_steps, **progress_state())
-        bar.close()
-        close_collection()
-        if interrupted is not None:
-            raise interrupted
-        raise_if_pending()
 
     name = job0.model.name if count == 1 else f"{job0.model.name} seeds {seeds}"
-    bar = tqdm(total=total_steps, initial=steps_done, unit="step", desc=f"train {name}",
+    bar = tqdm(total=total_steps, initial=progress.env_steps, unit="step", desc=f"train {name}",
                disable=not sys.stdout.isatty(), dynamic_ncols=True)
     if count > 1:
         logger.info("grouped training: %d members of '%s' (seeds %s) in one process, %d envs each",
                     count, job0.model.name, seeds, n_envs)
-    last_log_steps, last_log_time = steps_done, time.perf_counter()
+    last_log_steps, last_log_time = progress.env_steps, time.perf_counter()
     batches = iter(collector)
     prefetch = Prefetcher(batches) if overlap else None
 
-    def close_collection() -> None:
+    # --- the loop: one decision in every env, store it, learn, log, checkpoint ----------------------
+    try:
+        collected = next(batches, None)
+        while collected is not None:
+            batch: TensorDictBase = collected.reshape(count * n_envs, -1)  # [envs, time]
+            steps_before = progress.env_steps
+            progress.env_steps += batch.numel() // count
+            finished = progress.env_steps >= total_steps
+            for member in members:
+                member.observe(batch[member.rows])
+            if prefetch is not None:
+                prefetch.start()  # the next batch, collected while this one trains
+
+            if len(members[0].memory) >= learn_from:
+                updates = progress.earn_updates(batch.numel() // count, L.update_every)
+                for member in members:
+                    member.learn(updates, progress)
+                progress.updates += updates
+                if prefetch is None:
+                    collector.update_policy_weights_()
+            if prefetch is not None:
+                collected = prefetch.result()
+                acting.refresh()  # the collector is idle now: the next batch acts with these weights
+
+            bar.update(progress.env_steps - steps_before)
+            if bar.n % (50 * n_envs) < n_envs:
+                bar.set_postfix(eps=f"{float(members[0].exploration.eps):.3f}",
+                                speed_kmh=f"{members[0].recent_speed:.1f}", refresh=False)
+
+            if progress.crossed(steps_before, log_every) or finished:
+                now = time.perf_counter()
+                rate = (progress.env_steps - last_log_steps) / max(now - last_log_time, 1e-9)
+                validating = val_every > 0 and (progress.crossed(steps_before, val_every) or finished)
+                try:
+                    _log_interval(members, progress, total_steps, rate, validating, lines=bar.disable)
+                except JobInterrupted:  # stopped between validation steps: last.pt first, as below
+                    _save_last(members, progress, finished)
+                    raise
+                last_log_steps, last_log_time = progress.env_steps, now
+
+            if progress.crossed(steps_before, checkpoint_every) and not finished:
+                _save_last(members, progress)
+            # A stop signal ends training between batches, never inside one: every member's last.pt
+            # holds everything up to this batch (a resume loses nothing), then the signal is raised.
+            if pending() and not finished:
+                _save_last(members, progress)
+                raise_if_pending()
+            if prefetch is None:
+                collected = next(batches, None)
+    finally:  # however the loop ends (done, a stop signal, a non-finite loss): nothing goes on stepping the envs
+        bar.close()
         if prefetch is not None:
             prefetch.close()
         collector.shutdown()
 
-    # --- the loop: one decision in every env, store it, learn, log, checkpoint ----------------------
-    collected = next(batches, None)
-    while collected is not None:
-        batch: TensorDictBase = collected.reshape(count * n_envs, -1)  # [envs, time]
-        steps_before, steps_done = steps_done, steps_done + batch.numel() // count
-        for member in members:
-            member.observe(batch[member.rows])
-        if prefetch is not None:
-            prefetch.start()  # the next batch, collected while this one trains
+    if progress.env_steps < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
+        warnings.warn(f"collector stopped at {progress.env_steps} of {total_steps} env steps", stacklevel=2)
+    return [member.save_final(progress) for member in members]
 
-        if len(members[0].memory) >= learn_from:
-            update_credit += batch.numel() / count / L.update_every
-            updates = 0
-            while update_credit >= 1.0:  # one unit at a time, as the credit has always been spent
-                update_credit -= 1.0
-                updates += 1
-            for member in members:
-                losses = member.learn(updates)
-                if losses is not None and not torch.isfinite(losses).all():
-                    bar.close()
-                    close_collection()
-                    raise NonFiniteLossError(
-                        f"training loss became {losses.tolist()} at env step {steps_done} (update "
-                        f"{updates_done + updates}) for model '{member.job.model.name}' seed {member.job.seed}; "
-                        f"stopped. The last good checkpoint is {member.last_path} (if one was written). "
-                        f"Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
-            updates_done += updates
-            if prefetch is None:
-                collector.update_policy_weights_()
-        if prefetch is not None:
-            collected = prefetch.result()
-            acting.refresh()  # the collector is idle now: the next batch acts with these weights
 
-        bar.update(steps_done - steps_before)
-        if bar.n % (50 * n_envs) < n_envs:
-            bar.set_postfix(eps=f"{float(members[0].exploration.eps):.3f}",
-                            speed_kmh=f"{members[0].recent_speed:.1f}", refresh=False)
+def _save_last(members: Sequence[Member], progress: Progress, finished: bool = False) -> None:
+    for member in members:
+        member.save_last(progress, finished)
 
-        if steps_done // log_every > steps_before // log_every or steps_done >= total_steps:
-            now = time.perf_counter()
-            rate = (steps_done - last_log_steps) / max(now - last_log_time, 1e-9)
-            validating = val_every > 0 and (steps_done // val_every > steps_before // val_every
-                                               or steps_done >= total_steps)
-            for member in members:
-                metrics = member.interval_metrics(rate, updates_done)
-                if validating:
-                    try:
-                        metrics.update(member.validate(progress_state()))
-                    except JobInterrupted as interrupted:  # stopped between validation steps
-                        stop(interrupted)
-                with deferred():  # a signal during the store write waits for the stop below, after last.pt
-                    member.log(metrics, steps_done)
-                if bar.disable:  # no bar when output goes to a file: a line per log interval instead
-                    # The greedy validation is named only on the lines of a pass (a "nan" on the others read
-                    # as a failed validation).
-                    greedy = (f"; greedy validation: return {metrics['val/episode_return']:.0f}, crashes per "
-                              f"episode {metrics['val/collisions']:.2f}" if "val/collisions" in metrics else "")
-                    logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h, "
-                                "crashes per episode %.2f%s",
-                                member.job.model.name if count == 1 else f"{member.job.model.name} seed "
-                                f"{member.job.seed}", steps_done, total_steps, rate, metrics["train/epsilon"],
-                                metrics.get("train/avg_speed_kmh", float("nan")),
-                                metrics.get("train/collisions", float("nan")), greedy)
-            if count > 1:  # one line per group (scripts/gpu/protocol.sh reads its rate)
-                logger.info("grouped training '%s': %d/%d env steps per member, %.0f steps/s per member",
-                            job0.model.name, steps_done, total_steps, rate)
-            last_log_steps, last_log_time = steps_done, now
 
-        if steps_done // checkpoint_every > steps_before // checkpoint_every and steps_done < total_steps:
-            for member in members:
-                member.save_last(finished=False, **progress_state())
-
-        if pending() and steps_done < total_steps:
-            stop()
-        if prefetch is None:
-            collected = next(batches, None)
-
-    bar.close()
-    close_collection()
-    if steps_done < total_steps:  # pragma: no cover - the collector stops exactly at total_frames
-        warnings.warn(f"collector stopped at {steps_done} of {total_steps} env steps", stacklevel=2)
-    return [member.save_final(**progress_state()) for member in members]
+def _log_interval(members: Sequence[Member], progress: Progress, total_steps: int, rate: float, validating: bool,
+                  lines: bool) -> None:
+    """A log point: each member's curves since the last one (and a greedy validation pass when one
+    is due) go to its log; with `lines` (no progress bar: output goes to a file) a line per member."""
+    grouped = len(members) > 1
+    for member in members:
+        metrics = member.interval_metrics(rate, progress.updates)
+        if validating:
+            metrics.update(member.validate(progress))
+        with deferred():  # a signal during the store write waits for the loop's stop, after last.pt
+            member.log(metrics, progress.env_steps)
+        if lines:
+            # The greedy validation is named only on the lines of a pass (a "nan" on the others read
+            # as a failed validation).
+            greedy = (f"; greedy validation: return {metrics['val/episode_return']:.0f}, crashes per "
+                      f"episode {metrics['val/collisions']:.2f}" if "val/collisions" in metrics else "")
+            logger.info("train %s: %d/%d env steps, %.0f steps/s, epsilon %.3f, mean speed %.1f km/h, "
+                        "crashes per episode %.2f%s",
+                        f"{member.job.model.name} seed {member.job.seed}" if grouped else member.job.model.name,
+                        progress.env_steps, total_steps, rate, metrics["train/epsilon"],
+                        metrics.get("train/avg_speed_kmh", float("nan")),
+                        metrics.get("train/collisions", float("nan")), greedy)
+    if grouped:  # one line per group (scripts/gpu/protocol.sh reads its rate)
+        logger.info("grouped training '%s': %d/%d env steps per member, %.0f steps/s per member",
+                    members[0].job.model.name, progress.env_steps, total_steps, rate)

@@ -50,6 +50,7 @@ from .builders import (
 )
 from .frame_replay import FrameReplay
 from .n_step import NStepReturns
+from .progress import Progress
 from .training_reward import training_reward
 
 Log = Callable[[dict[str, float], int], None]
@@ -130,7 +131,8 @@ class Member:
         job, L = self.job, self.job.learner
         device = torch.device(job.device)
         self.rows = rows
-        self.generator = env.simulator.generators[rows.start // L.n_envs]
+        # The member's own traffic generator (its block of the group's envs), saved and restored as env_rng.
+        self.generator = env.simulator.randomness.generators[rows.start // L.n_envs]
         self.net = make_network(job).to(device)
         self.actor = make_actor(self.net).to(device)
         self.exploration = make_exploration(L, device)
@@ -202,15 +204,16 @@ class Member:
                 self.episodes[key].extend(finished[key].tolist())
             self.recent_speed = float(finished["avg_speed_kmh"].mean())
 
-    def learn(self, updates: int) -> torch.Tensor | None:
-        """`updates` gradient steps on prioritized samples; returns their losses (None if none)."""
+    def learn(self, updates: int, progress: Progress) -> None:
+        """`updates` gradient steps on prioritized samples (the batch that brought training to
+        `progress` earned them); stops the run on a loss that is not finite."""
         L = self.job.learner
         losses = []
         for _ in range(updates):
             sample = self.memory.sample()
             out = self.update(sample)
             # DQNLoss stores the squared TD error; PER's priority is |delta| (to the alpha).
-            # nan_to_num keeps the sum tree valid until the loop's check stops the run.
+            # nan_to_num keeps the sum tree valid until the check below stops the run.
             priority = torch.nan_to_num(out["td_error"].sqrt(), nan=1.0, posinf=1.0)
             self.memory.update_priority(sample["index"], priority)
             self.target_updater.step()
@@ -218,10 +221,16 @@ class Member:
                 update_ema(self.ema_net, self.net, L.ema_decay)
             losses.append(out["loss"])
         if not losses:
-            return None
+            return
         batch_loss = torch.stack(losses)
         self.losses.append(batch_loss.mean())
-        return batch_loss
+        # One host read per batch, not per update; the run stops rather than write broken weights.
+        if not torch.isfinite(batch_loss).all():
+            raise NonFiniteLossError(
+                f"training loss became {batch_loss.tolist()} at env step {progress.env_steps} (update "
+                f"{progress.updates + updates}) for model '{self.job.model.name}' seed {self.job.seed}; stopped. "
+                f"The last good checkpoint is {self.last_path} (if one was written). "
+                f"Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
 
     # --- log points --------------------------------------------------------------------------------
     def interval_metrics(self, steps_per_s: float, updates_done: int) -> dict[str, float]:
@@ -237,7 +246,7 @@ class Member:
         self.losses = []
         return metrics
 
-    def validate(self, progress: dict[str, Any]) -> dict[str, float]:
+    def validate(self, progress: Progress) -> dict[str, float]:
         """A greedy pass over `val_episodes` episodes per validation env, in the training traffic
         drawn from validation seeds; keeps `best.pt` when the mean return is the best so far."""
         episodes_per_env, seed = self.job.eval.val_episodes, self.job.seed + VAL_SEED_OFFSET
@@ -249,10 +258,10 @@ class Member:
         if better:
             self.best_val = metrics["val/episode_return"]
         if keep or better:  # one weights-only state serves both files
-            state = weights_only(self.checkpoint_state(finished=False, **progress))
+            state = weights_only(self.checkpoint_state(progress, finished=False))
             if keep:  # each pass's network, for reselection (eval.checkpoint=reselected)
                 save_checkpoint({**state, "val_return": metrics["val/episode_return"]},
-                                val_checkpoint_path(self.checkpoint_dir, progress["env_steps"]))
+                                val_checkpoint_path(self.checkpoint_dir, progress.env_steps))
             if better:
                 save_checkpoint(state, self.checkpoint_dir / BEST_CHECKPOINT)
         metrics["val/best_episode_return"] = self.best_val
@@ -262,13 +271,12 @@ class Member:
         return metrics
 
     # --- checkpoints -------------------------------------------------------------------------------
-    def checkpoint_state(self, finished: bool, env_steps: int, updates: int, update_credit: float,
-                         group: list[int] | None = None) -> dict[str, Any]:
+    def checkpoint_state(self, progress: Progress, finished: bool) -> dict[str, Any]:
         megabytes = self.memory.megabytes() if isinstance(self.memory, FrameReplay) else buffer_megabytes(self.buffer)
         small = megabytes <= self.job.runtime.checkpoint_buffer_max_mb
         return {
             "format": 1, "model": self.job.model.name, "train_key": self.train_key, "training_config": self.config,
-            "finished": finished, "env_steps": env_steps, "updates": updates, "update_credit": update_credit,
+            "finished": finished, **progress.to_checkpoint(),
             "network": self.net.state_dict(), "loss": self.loss_module.state_dict(),
             "optimizer": self.optimizer.state_dict(),
             "exploration": self.exploration.state_dict(), "epsilon": float(self.exploration.eps),
@@ -278,16 +286,15 @@ class Member:
             "replay_buffer": self.memory.state_dict() if small else None,
             "rng": rng_state(), "env_rng": self.generator.get_state(), "best_val_return": self.best_val,
             "evaluation_version": EVALUATION_VERSION,
-            **({"grouped_with": group} if group else {}),
         }
 
-    def save_last(self, **progress: Any) -> None:
-        save_checkpoint(self.checkpoint_state(**progress), self.last_path)
+    def save_last(self, progress: Progress, finished: bool = False) -> None:
+        save_checkpoint(self.checkpoint_state(progress, finished), self.last_path)
 
-    def save_final(self, **progress: Any) -> Path:
+    def save_final(self, progress: Progress) -> Path:
         """final.pt (replacing last.pt), and ema.pt: a finished checkpoint whose network is the moving
         average (no replay memory)."""
-        final = self.checkpoint_state(finished=True, **progress)
+        final = self.checkpoint_state(progress, finished=True)
         if self.ema_net is not None:
             save_checkpoint(weights_only({**final, "network": self.ema_net.state_dict()}),
                             self.checkpoint_dir / EMA_CHECKPOINT)

@@ -14,6 +14,7 @@ import torch
 from ..contracts import events
 from ..contracts.simulator_config import HOST_TYPE, ScenarioConfig, SimulatorConfig
 from .neighbours import Neighbours, gather_vehicles, lane_occupancy, nearest_per_lane
+from .randomness import TrafficRandomness
 from .reward import RewardTerms, speed_reward
 from .state import HOST, Action, TrafficState
 
@@ -70,33 +71,21 @@ def episode_metrics(state: TrafficState) -> dict[str, torch.Tensor]:
 
 
 class HighwaySimulator:
-    """Holds the parameters, the random generators and the state of `n_envs` envs.
+    """Holds the parameters, the random draws and the state of `n_envs` envs.
 
-    `seed` is one seed, or one seed per training member of a group (`hgm_repro.learner.grouped`):
-    then the envs form len(seed) contiguous blocks of n_envs / len(seed), and each block draws its
-    traffic from its own generator only, so that a member's traffic is the same alone or in any group.
+    `seed` is one seed, or one seed per training member of a group (`hgm_repro.learner.grouped`);
+    `randomness.py` keeps each member's traffic its own, and the physics here draws for the whole batch.
     """
 
     def __init__(self, config: SimulatorConfig, scenario: ScenarioConfig, n_envs: int,
                  device: torch.device | str = "cpu", seed: int | Sequence[int] = 0):
         if not isinstance(n_envs, int) or n_envs < 1:
             raise ValueError(f"n_envs={n_envs!r} is not allowed: need a whole number >= 1")
-        seeds = [int(seed)] if isinstance(seed, int) else [int(s) for s in seed]
-        if not seeds or n_envs % len(seeds):
-            raise ValueError(f"seed={list(seeds)!r} is not allowed with n_envs={n_envs}: need one seed, or one seed "
-                             f"per member with n_envs a multiple of their number")
         self.config = config
         self.scenario = scenario
         self.n_envs = n_envs
         self.device = torch.device(device)
-        self.member_envs = n_envs // len(seeds)
-        self.generators = []
-        for member_seed in seeds:
-            generator = torch.Generator(device=self.device)
-            generator.manual_seed(member_seed)
-            self.generators.append(generator)
-        # A solo simulator's one generator, under the name checkpoints and seeding use.
-        self.generator = self.generators[0]
+        self.randomness = TrafficRandomness(seed, n_envs, self.device)
         self.host_safety_layer = config.host_safety_layer
         # Switched off only to script situations by hand (tests, figures): vehicles that leave the
         # window or crash then stay away instead of coming back at the far edge.
@@ -131,43 +120,19 @@ class HighwaySimulator:
         self.lane_centres = (torch.arange(c.lanes, device=d, dtype=torch.float32) + 0.5) * c.lane_width
 
     @property
-    def n_members(self) -> int:
-        return len(self.generators)
+    def generator(self) -> torch.Generator:
+        """A solo simulator's one generator: what seeding a batch of envs (evaluation, Gymnasium) sets."""
+        return self.randomness.generator
 
-    def _rand(self, *shape: int, live: Sequence[bool] | None = None) -> torch.Tensor:
-        """Uniform draws whose first dimension runs over the envs: each member's block of envs from
-        its own generator. Members not `live` draw nothing (their rows are zeros and go unused), as a
-        solo simulator returns early without drawing."""
-        if self.n_members == 1 and live is None:
-            return torch.rand(*shape, generator=self.generator, device=self.device)
-        return self._rand_rows([self.member_envs if live is None or live[k] else 0 for k in range(self.n_members)],
-                               *shape[1:], fill=[self.member_envs] * self.n_members)
-
-    def _rand_rows(self, counts: Sequence[int], *rest: int, fill: Sequence[int] | None = None) -> torch.Tensor:
-        """counts[k] rows drawn from member k's generator, concatenated in member order (padded with
-        zero rows up to fill[k])."""
-        parts = []
-        for k, generator in enumerate(self.generators):
-            parts.append(torch.rand(counts[k], *rest, generator=generator, device=self.device))
-            if fill is not None and fill[k] > counts[k]:
-                parts.append(torch.zeros(fill[k] - counts[k], *rest, device=self.device))
-        return parts[0] if len(parts) == 1 else torch.cat(parts)
-
-    def _member_any(self, mask: torch.Tensor) -> list[bool]:
-        """Per member: whether any of its envs has a True in `mask` ([N, ...])."""
-        return mask.reshape(self.n_members, -1).any(1).tolist()
-
-    def _draw_types(self, *shape: int, live: Sequence[bool] | None = None) -> torch.Tensor:
-        # Inverse-CDF sampling: much cheaper than torch.multinomial for many small draws.
-        u = self._rand(*shape, live=live)
+    def _types(self, u: torch.Tensor) -> torch.Tensor:
+        """Vehicle types in the scenario's mix from uniform draws `u`, by inverse CDF (much cheaper than
+        torch.multinomial for many small draws)."""
         return torch.searchsorted(self.spawn_cdf, u.reshape(-1), right=True).clamp(max=len(self.spawn_cdf) - 1) \
-            .reshape(*shape)
+            .reshape(u.shape)
 
-    def _draw_colors(self, *shape: int, live: Sequence[bool] | None = None,
-                     counts: Sequence[int] | None = None) -> torch.Tensor:
+    def _colors(self, hue: torch.Tensor) -> torch.Tensor:
         # Bright, saturated colours drawn independently of the type, so that pixels never tell
-        # a connected vehicle from a human-driven one. `counts`: rows per member (see _rand_rows).
-        hue = self._rand(*shape, live=live) if counts is None else self._rand_rows(counts, *shape[1:])
+        # a connected vehicle from a human-driven one.
         k = (torch.arange(3, device=self.device) / 3.0)
         rgb = 0.5 + 0.5 * torch.cos(2 * torch.pi * (hue.unsqueeze(-1) + k))
         return (40 + 200 * rgb).to(torch.uint8)
@@ -175,17 +140,17 @@ class HighwaySimulator:
     def _initial_state(self, mask: torch.Tensor, old: TrafficState | None) -> TrafficState:
         """A fresh episode for envs where `mask` is True (others copied from `old`)."""
         c, d, n = self.config, self.device, self.n_envs
-        # A member none of whose envs resets draws nothing, so that its traffic never depends on
-        # when the other members' episodes end.
-        live = None if old is None else self._member_any(mask)
-        if live is not None and not any(live):
+        # Envs that do not reset draw nothing (None: none resets), so that a member's traffic never
+        # depends on when another member's episodes end.
+        draws = self.randomness.draws(None if old is None else mask)
+        if draws is None:
             return old
         per_lane, lanes = c.vehicles_per_lane, c.lanes
         span = c.window_behind + c.window_ahead
         spacing = span / per_lane
         # Vehicles start on a jittered grid: every lane evenly filled, no overlap by construction.
         base = -c.window_behind + (torch.arange(per_lane, device=d) + 0.5) * spacing
-        jitter = (self._rand(n, lanes, per_lane, live=live) * 2 - 1) * 0.2 * spacing
+        jitter = (draws.rand(lanes, per_lane) * 2 - 1) * 0.2 * spacing
         pos_lon = (base.view(1, 1, -1) + jitter).reshape(n, lanes * per_lane)
         lane = torch.arange(lanes, device=d).repeat_interleave(per_lane).expand(n, -1).clone()
         # The grid slot nearest the origin in the host's start lane becomes the host, moved to slot 0.
@@ -194,16 +159,16 @@ class HighwaySimulator:
         perm[0], perm[host_slot] = host_slot, 0
         pos_lon, lane = pos_lon[:, perm], lane[:, perm]
         pos_lon[:, HOST] = 0.0
-        vtype = self._draw_types(n, lanes * per_lane, live=live)
+        vtype = self._types(draws.rand(lanes * per_lane))
         vtype[:, HOST] = 0
-        speed = c.v_min + self._rand(n, lanes * per_lane, live=live) * (c.v_max - c.v_min)
+        speed = c.v_min + draws.rand(lanes * per_lane) * (c.v_max - c.v_min)
         speed[:, HOST] = c.host_start_speed_kmh / 3.6
         m = lanes * per_lane
         zeros_f = torch.zeros(n, device=d)
         fresh = TrafficState(
             pos_lon=pos_lon, pos_lat=self.lane_centres[lane], speed=speed, cruise=speed.clone(), target_lane=lane,
             vtype=vtype,
-            active=torch.ones(n, m, dtype=torch.bool, device=d), color=self._draw_colors(n, m, live=live),
+            active=torch.ones(n, m, dtype=torch.bool, device=d), color=self._colors(draws.rand(m)),
             was_ahead=pos_lon > 0, passed=torch.zeros(n, m, dtype=torch.bool, device=d),
             decision=torch.zeros(n, dtype=torch.long, device=d),
             ep_speed_sum=zeros_f.clone(), ep_lane_changes=zeros_f.clone(), ep_overtakes=zeros_f.clone(),
@@ -245,7 +210,7 @@ class HighwaySimulator:
         """Table 1's random behaviour: a random lane change with probability r_lat, else a random
         longitudinal action with probability r_lon, else no action."""
         n, m = state.pos_lon.shape
-        u_lat, u_lon, u_dir = self._rand(n, m), self._rand(n, m), self._rand(n, m)
+        u_lat, u_lon, u_dir = self.randomness.rand(m), self.randomness.rand(m), self.randomness.rand(m)
         r_lat, r_lon = self.r_lat_by_type[state.vtype], self.r_lon_by_type[state.vtype]
         act = torch.full((n, m), int(Action.NO_ACTION), device=self.device, dtype=torch.long)
         lon_act = torch.where(u_dir < 0.5, int(Action.ACCELERATE), int(Action.DECELERATE))
@@ -485,10 +450,8 @@ class HighwaySimulator:
         drawn among those with room in the spawn band; where no lane has room it waits."""
         c, s, d = self.config, self.state, self.device
         n, m = s.pos_lon.shape
-        # Whether a member draws must depend on its own envs only: a solo simulator returns early
-        # without drawing, so a member of a group skips its draws in the same places.
-        live = self._member_any(candidates)
-        if not any(live):
+        draws = self.randomness.draws(candidates)
+        if draws is None:
             return
         candidates = candidates.clone()
         half_len = self.half_len_by_type[s.vtype]
@@ -507,8 +470,8 @@ class HighwaySimulator:
             slot = torch.where(candidates, slot_idx, m).amin(1)
             has = slot < m
             slot = slot.clamp(max=m - 1)
-            new_type = self._draw_types(n, live=live)
-            new_speed = c.v_min + self._rand(n, live=live) * (c.v_max - c.v_min)
+            new_type = self._types(draws.rand())
+            new_speed = c.v_min + draws.rand() * (c.v_max - c.v_min)
             hl_new = self.half_len_by_type[new_type].unsqueeze(1)
             # The newcomer never closes in on its neighbour: ahead of the field it drives at least
             # as fast as the vehicle behind it, behind the field at most as fast as the one ahead.
@@ -521,15 +484,14 @@ class HighwaySimulator:
             else:
                 spot = torch.where(empty, inner, torch.minimum(inner, near_pos - need))
                 free = spot >= edge - SPAWN_ZONE + 5.0
-            score = torch.where(free, self._rand(n, c.lanes, live=live), -1.0)
+            score = torch.where(free, draws.rand(c.lanes), -1.0)
             lane = score.argmax(1, keepdim=True)
             spawn_pos = spot.gather(1, lane).squeeze(1)
             new_speed = torch.where(empty.gather(1, lane), new_speed.unsqueeze(1),
                                     lane_speed.gather(1, lane)).squeeze(1)
             lane = lane.squeeze(1)
             ok = has & free.any(1)
-            live = [was and now for was, now in zip(live, self._member_any(ok), strict=True)]
-            if not any(live):
+            if not draws.narrow(ok):
                 return
             rows = torch.nonzero(ok).squeeze(1)
             cols, lanes = slot[rows], lane[rows]
@@ -540,9 +502,7 @@ class HighwaySimulator:
             s.target_lane[rows, cols] = lanes
             s.vtype[rows, cols] = new_type[rows]
             s.active[rows, cols] = True
-            counts = [rows.numel()] if self.n_members == 1 else \
-                torch.bincount(rows // self.member_envs, minlength=self.n_members).tolist()
-            s.color[rows, cols] = self._draw_colors(rows.numel(), counts=counts)
+            s.color[rows, cols] = self._colors(draws.rand_rows(rows))
             s.was_ahead[rows, cols] = front
             s.passed[rows, cols] = False
             candidates[rows, cols] = False
