@@ -490,8 +490,8 @@ class HighwaySimulator:
             new_speed = torch.where(empty.gather(1, lane), new_speed.unsqueeze(1),
                                     lane_speed.gather(1, lane)).squeeze(1)
             lane = lane.squeeze(1)
-            ok = has & free.any(1)
-            if not draws.narrow(ok):
+            ok = draws.narrow(has & free.any(1))
+            if ok is None:
                 return
             rows = torch.nonzero(ok).squeeze(1)
             cols, lanes = slot[rows], lane[rows]

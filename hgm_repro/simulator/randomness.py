@@ -91,9 +91,15 @@ class Draws:
         return torch.cat([torch.rand(count, *shape, generator=generator, device=r.device)
                           for generator, count in zip(r.generators, counts, strict=True)])
 
-    def narrow(self, envs: torch.Tensor) -> bool:
-        """Members with no True in `envs` stop drawing for good, as a solo simulator returns there;
-        whether any member still draws."""
-        now = self.randomness._members_with(envs)
+    def narrow(self, envs: torch.Tensor) -> torch.Tensor | None:
+        """Members with no True in `envs` ([n_envs] bool) stop drawing for good, as a solo simulator
+        returns there; `envs` without the rows of members that no longer draw (None: no member draws).
+        Those rows hold zeros, not draws, and a solo simulator would not have gone on to use them."""
+        r = self.randomness
+        now = r._members_with(envs)
         self.drawing = [was and still for was, still in zip(self.drawing, now, strict=True)]
-        return any(self.drawing)
+        if not any(self.drawing):
+            return None
+        if all(self.drawing):
+            return envs
+        return envs & torch.tensor(self.drawing, device=r.device).repeat_interleave(r.member_envs)

@@ -43,6 +43,30 @@ def test_member_traffic_is_the_same_alone_and_in_a_group(scenario: str):
     assert not torch.equal(group[-1][:envs], group[-1][envs:2 * envs])
 
 
+def test_member_traffic_stays_its_own_after_a_respawn_it_could_not_place():
+    # A member whose waiting vehicles find no room stops drawing (a solo simulator returns there);
+    # its rows then hold zeros, on which the next try may find room: that spawn must not happen.
+    # Seed 2's 16 envs meet this at step 75 under these actions.
+    cfg = simulator_config()
+    actions = torch.randint(0, 5, (90, 16), generator=torch.Generator().manual_seed(0))
+
+    def member_two(seeds: list[int]) -> list[torch.Tensor]:
+        sim = HighwaySimulator(cfg, scenario_config("train", cfg), 16 * len(seeds), seed=seeds)
+        rows = slice(16 * seeds.index(2), 16 * (seeds.index(2) + 1))
+        out = []
+        for step_actions in actions:
+            result = sim.step(step_actions.repeat(len(seeds)))
+            if bool(result.done.any()):
+                sim.reset(result.done)
+            s = sim.state
+            out.append(torch.cat([s.pos_lon, s.speed, s.vtype.float(), s.active.float(), s.color.float().flatten(1)],
+                                 1)[rows])
+        return out
+
+    for alone, grouped in zip(member_two([2]), member_two([1, 2]), strict=True):
+        torch.testing.assert_close(grouped, alone, rtol=0, atol=0)
+
+
 def test_group_of_seeds_needs_whole_blocks():
     cfg = simulator_config()
     with pytest.raises(ValueError, match=r"seed=\[1, 2\] is not allowed with n_envs=3"):
