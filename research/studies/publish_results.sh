@@ -12,7 +12,7 @@
 # model), so that a run cut off after an hour has whole rows of Table 6, the proposed model's
 # first, rather than a third of every row; the bundle and report are rewritten after each model.
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 ROOT=$PWD
 RUNS=research/studies/runs/results
 mkdir -p "$RUNS"

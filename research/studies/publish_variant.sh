@@ -11,7 +11,7 @@
 # Resumable as publish_results.sh is: run again, it reuses finished trainings and evaluations. Published
 # again, the variant's runs replace its earlier ones in docs/results/ (the grid's models stay as they are).
 set -euo pipefail
-cd "$(dirname "$0")/.."
+cd "$(dirname "$0")/../.."
 model=${1:-}
 if [ -z "$model" ] || [ ! -f "conf/model/$model.yaml" ]; then
   echo "publish_variant.sh: model '${model}' has no config; allowed: $(cd conf/model && ls -- *.yaml | sed 's/\.yaml$//' | xargs)" >&2
