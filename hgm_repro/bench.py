@@ -380,7 +380,11 @@ TRAINING_PATHS = {
     # What one training ran before the CPU's second core and bf16 were used: float32, one thread,
     # collect then update.
     "baseline": ("runtime.update_dtype=float32", "runtime.overlap=false", "runtime.torch_threads=1"),
-    "default": (),  # the preset as the main job runs it (runtime.update_dtype and runtime.overlap: auto)
+    # The preset as the main job runs it: the baseline's algorithm with torch's threads on every core
+    # the job may use (runtime.torch_threads: 0), float32 (runtime.update_dtype: auto on a CPU).
+    "default": (),
+    # The opt-in overlap: the next batch collected in a second thread while this one trains.
+    "overlap": ("runtime.update_dtype=float32", "runtime.overlap=true", "runtime.torch_threads=1"),
 }
 
 
@@ -640,7 +644,7 @@ def main(argv: list[str] | None = None) -> int:
                     row["vs_one_member_one_thread"] = round(row["env_steps_per_s"] / alone["env_steps_per_s"], 3)
                     emit(row)
         if "training" in parts:
-            # One run, the two paths in turn, twice: a busy machine slows both alike.
+            # One run, the paths in turn, twice: a busy machine slows both alike.
             for _ in range(2):
                 for path in TRAINING_PATHS:
                     print(f"training, quick preset, {path} path, on {device}...", file=sys.stderr)

@@ -1,7 +1,7 @@
 """The learner: Dueling DQN with prioritized experience replay on TorchRL (Selected Algorithm, Table 4).
 
 `train(job, checkpoint_dir, log) -> Path` trains `job.model` (`job`: the typed `JobConfig` that
-`hgm_repro.contracts.schema.validate` builds) on the training traffic and returns the final checkpoint
+`hgm_repro.contracts.schema.check_config` builds) on the training traffic and returns the final checkpoint
 (`checkpoint_dir/final.pt`); `train_group(jobs, checkpoint_dirs, logs)` trains the seeds of one model in one
 process, in the same loop (`loop.py`: a solo run is a group of one). The parts are TorchRL's: `Collector` over
 the batched env (warm-up through its `init_random_frames`), `TensorDictPrioritizedReplayBuffer` on a

@@ -20,7 +20,8 @@ QUICK = {"check": False, "timeout": 120}
 def test_help_lists_groups_options_and_examples(tmp_path: Path) -> None:
     out = hgm(tmp_path, "--help", **QUICK)
     assert out.returncode == 0, out.stderr
-    for line in ("experiment: paper, paper_pixels, paper_steps, quick, quick160, smoke", "launcher: basic, joblib", "learner: dqn",
+    for line in ("experiment: paper, paper_pixels, paper_steps, quick, quick160, smoke",
+                 "launcher: basic, joblib", "learner: dqn",
                  "model: coordinate, coordinate_guarded, human, idm_limits, idm_mobil, idm_mobil_limits, min, "
                  "min_guarded, proposed, proposed_enriched, proposed_guarded, random",
                  "scenario: 1, 2, 3, 4, 5, train",

@@ -57,6 +57,16 @@ def test_the_overlapped_loop_acts_one_batch_behind(overlapped_run, tmp_path: Pat
     assert _losses(solo) != _losses(log)
 
 
+def test_two_torch_threads_give_the_same_training_twice(tmp_path: Path):
+    # The default path on a 2-core CPU: the collect-then-update loop with torch's threads on both cores.
+    runs = []
+    for name in ("first", "second"):
+        log = Recorder()
+        runs.append((_digest(train(compose_job("seed=4", "runtime.torch_threads=2"), tmp_path / name, log)),
+                     _values(log)))
+    assert runs[0] == runs[1]
+
+
 def test_an_overlapped_run_killed_mid_training_resumes_and_stops_at_the_same_step(tmp_path: Path):
     job = compose_job(*OVERLAPPED)
     with pytest.raises(KeyboardInterrupt):
