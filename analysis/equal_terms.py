@@ -11,7 +11,11 @@ from analysis.claims import ClaimResult, evaluate_claims
 from analysis.labels import GUARDED, LAYER_AT_TEST, LEARNED, fmt, model_label
 from analysis.sections import Section
 from analysis.stats import mean_ci
-from analysis.tables import HEADLINE_SCENARIO, per_scenario
+from analysis.tables import HEADLINE_SCENARIO, per_scenario, seed_margins
+
+# A guarded host drives under the layer that keeps the human-driven host crash-free, so a seed on which it
+# beats that host counts only when it is nearly as safe: under this many collisions per episode.
+GUARDED_SAFE_COLLISIONS = 0.05
 
 TITLE = "On equal terms: the learned hosts under the safety layer"
 
@@ -57,6 +61,18 @@ def mark_sentence(evals: pd.DataFrame, scenario: str = HEADLINE_SCENARIO) -> str
     return text + "."
 
 
+def seeds_sentence(evals: pd.DataFrame, scenario: str = HEADLINE_SCENARIO) -> str | None:
+    """On how many seeds the guarded proposed host beats the human-driven host of the same seed in `scenario`
+    (more return, under `GUARDED_SAFE_COLLISIONS` collisions per episode), or None without both hosts' tests."""
+    margins = seed_margins(evals, max_collisions=GUARDED_SAFE_COLLISIONS)
+    mine = margins[(margins["model"] == "proposed_guarded") & (margins["scenario"] == scenario)]
+    if mine.empty:
+        return None
+    return (f"Seed by seed in scenario {scenario}, the guarded proposed host earns more than the human-driven host "
+            f"of the same seed, with under {GUARDED_SAFE_COLLISIONS:g} collisions per episode, on "
+            f"{int(mine['beating'].sum())} of {len(mine)} seeds.")
+
+
 def _said(evals: pd.DataFrame, model: str, scenario: str) -> tuple[str, int]:
     """'R per episode with C collisions and L lane changes (n seeds)' of `model` in `scenario`, and n."""
     (ret, n), (crashes, _), (changes, _) = (_mean(evals, model, k, scenario)
@@ -95,6 +111,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, paper_claims: list[ClaimR
              "anatomy's refusal table measures what that costs it. In the evidence below, Proposed, Min and Coordinate "
              "name their guarded forms.")
     out.para(mark_sentence(evals))
+    if (seeds := seeds_sentence(evals)) is not None:
+        out.para(seeds)
     guarded = guarded_claims(evals, curves)
     paper = {c.number: c.verdict for c in paper_claims}
     out.table([["Claim", "Statement", "Paper's methods", "Guarded forms"],

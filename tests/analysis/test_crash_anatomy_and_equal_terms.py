@@ -111,6 +111,17 @@ def test_the_mark_sentence_states_the_guarded_return_against_idm_mobil():
     assert "IDM + MOBIL, the mark under the same layer, has no test" in equal_terms.mark_sentence(no_mark)
 
 
+def test_the_seeds_sentence_counts_safe_wins_over_the_same_seeds_human_driven_host():
+    rows = [dict(model=m, scenario="3", seed=seed, episode_return=r, collisions=c)
+            for m, seed, r, c in [("human", 0, 200.0, 0.0), ("human", 1, 300.0, 0.0), ("human", 2, 250.0, 0.0),
+                                  ("proposed_guarded", 0, 210.0, 0.0),    # wins, safe
+                                  ("proposed_guarded", 1, 290.0, 0.0),    # loses
+                                  ("proposed_guarded", 2, 260.0, 0.06)]]  # wins, but not under 0.05
+    text = equal_terms.seeds_sentence(pd.DataFrame(rows))
+    assert text is not None and "on 1 of 3 seeds" in text and "under 0.05 collisions" in text
+    assert equal_terms.seeds_sentence(pd.DataFrame(rows[:3])) is None
+
+
 @pytest.fixture(scope="module")
 def guarded_report(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A store with the paper's grid, the guarded grid and the reference hosts; its episodes given event
