@@ -95,7 +95,7 @@ install() {
   if compgen -G ".whl/*.whl" >/dev/null; then
     if [ ! -f "$SITE/.hgm_repro_wheels" ]; then
       "$PY" -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade --target "$SITE" .whl/*.whl
-      touch "$SITE/.hgm_repro_wheels"
+      mkdir -p "$SITE" && touch "$SITE/.hgm_repro_wheels"
     fi
   elif "$PY" -c "import torchrl, tensordict, hydra, mlflow" 2>/dev/null; then
     echo "no wheels in .whl/: using the packages $PY already has"
