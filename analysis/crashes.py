@@ -151,6 +151,11 @@ def section(episodes: pd.DataFrame, out_dir: Path) -> tuple[Section, pd.DataFram
              if table.loc[table["model"] == m, "crashes"].sum() == 0]
     if never:
         out.para("No crash in any test episode: " + ", ".join(never) + ".")
+    old = episodes.loc[episodes.index.difference(recorded(episodes).index), "model"]
+    if not old.empty:
+        out.para("Not recorded for " + ", ".join(model_label(m) for m in ordered_models(old.unique())) + " (in "
+                 f"{len(old)} of the {len(episodes)} test episodes): those tests predate the per-episode event "
+                 "columns, and their crashes are not counted here. Test the trainings again to add them.")
     paths = figure(table, out_dir / "fig_crash_anatomy")
     if paths is not None:
         out.figure(paths["png"], "Crashes per test episode by what led to them, per host (all scenarios, then each "

@@ -12,7 +12,7 @@ import pytest
 from analysis import crashes, equal_terms
 from analysis.bundle import load_bundle, write_bundle
 from analysis.claims import evaluate_claims
-from analysis.labels import GUARDED
+from analysis.labels import GUARDED, model_label
 from analysis.load import load_store
 from analysis.pipeline import build_outputs
 from analysis.synthetic import SyntheticSpec, synthetic_frames, write_store
@@ -70,6 +70,8 @@ def test_tests_without_the_event_columns_say_the_anatomy_is_not_recorded(tmp_pat
     # A bundle combined from old and new tests: only the rows that recorded the events count.
     mixed = pd.concat([old.assign(scenario="1"), hand_built()], ignore_index=True)
     assert crashes.anatomy(mixed)["episodes"].sum() == len(hand_built())
+    said = " ".join(b.text for b in crashes.section(mixed, tmp_path)[0].blocks if isinstance(b.text, str))
+    assert f"Not recorded for {model_label('proposed')} (in {len(old)} of the {len(mixed)} test episodes)" in said
 
 
 GRID = ("proposed", "min", "coordinate", "human", "idm_mobil", *GUARDED)
