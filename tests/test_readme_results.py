@@ -19,12 +19,16 @@ BUNDLE = REPO_ROOT / "docs" / "results"
 SCENARIOS = ["1", "2", "3", "4", "5"]
 # The README table's row labels and the models they stand for.
 ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (camera + V2X list)": "coordinate",
-        "Variant: enriched HGM, 160k steps": "proposed_enriched", "Human-driven host": "human",
+        "Variant: enriched HGM, 160k steps": "proposed_enriched",
+        "Guarded proposed (not the paper's)": "proposed_guarded", "Guarded Min (not the paper's)": "min_guarded",
+        "Guarded Coordinate (not the paper's)": "coordinate_guarded",
+        "Human-driven host": "human",
         "IDM + MOBIL": "idm_mobil"}
 # The table's columns after the label, as headline() names them.
 COLUMNS = ["episode_return/scenario", "episode_return/mean", "collisions/scenario", "collisions/mean"]
 # The sentences that quote a host's paired return difference to the human-driven host, and the model each quotes.
-PAIRED = {"the proposed host's": "proposed", "its": "proposed_enriched"}
+PAIRED = {"the proposed host's": "proposed", "its": "proposed_enriched",
+          "the guarded proposed host's": "proposed_guarded"}
 CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?) \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\]$")
 needs_bundle = pytest.mark.skipif(not (BUNDLE / "evals.csv").is_file(), reason="no committed results bundle")
 
