@@ -52,8 +52,9 @@ def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
                              "the same store `python -m hgm_repro` writes to)")
     source.add_argument("--bundle", type=Path, nargs="+", default=None, metavar="DIR",
                         help="read a results bundle (written by --write-bundle) instead of a store; several "
-                             "bundles are read as one (a variant beside the published grid), and a model that a "
-                             "later bundle holds replaces that model's runs in the earlier ones")
+                             "bundles are read as one (a variant beside the published grid), and a model at an "
+                             "experiment preset that a later bundle holds replaces its runs at that preset in the "
+                             "earlier ones")
     parser.add_argument("--experiment", default="hgm_repro", help="MLflow experiment name (default: hgm_repro)")
     parser.add_argument("--write-bundle", type=Path, default=None, metavar="DIR",
                         help="also write what was read (store or bundle) as a results bundle into DIR")

@@ -2,36 +2,68 @@
 
 A variant (a model that departs from the paper, say) is trained in a store of its own, after the
 grid was published; its bundle is then read beside the grid's bundle, and the report shows both.
-Sources combine by whole models: when two hold the same model, the later one's runs of that model
-replace the earlier one's (a re-run of a variant replaces its first publication), and the report's
-notes say so, so that nothing is mixed silently.
+Sources combine by whole cells of (model, experiment preset): when two hold the same model at the same
+preset, the later one's runs of it replace the earlier one's (a re-run of a variant replaces its first
+publication), and the report's notes say so, so that nothing is mixed silently. The same model at
+another preset (a rung of the scale ladder beside the quick grid) is kept beside it.
 """
 
 from __future__ import annotations
 
 import pandas as pd
 
-from analysis.load import StoreData
+from analysis.load import UNKNOWN_EXPERIMENT, StoreData, run_experiments
 
 # The StoreData tables, each with a `model` column.
 _TABLES = ("runs", "curves", "evals", "episodes")
 
 
-def _models(data: StoreData) -> set[str]:
-    found: set[str] = set(data.configs)
+def _presets(data: StoreData, frame: pd.DataFrame) -> pd.Series:
+    """The experiment preset of each row of `frame`, as its evaluations name it: an eval row's own
+    `experiment`; a row naming an eval run (episodes, the eval runs) that run's; a row naming a training
+    (curves, the training runs) the preset of the evaluations of that `train_key`; else the run's own
+    preset param or tag; else unknown."""
+    if "experiment" in frame.columns:
+        return frame["experiment"].fillna(UNKNOWN_EXPERIMENT).astype(str)
+    evals = data.evals
+    out = pd.Series(pd.NA, index=frame.index, dtype=object)
+    if "experiment" in evals.columns:
+        if "run_id" in frame.columns and "run_id" in evals.columns:
+            by_run = evals.drop_duplicates("run_id").set_index(evals.drop_duplicates("run_id")["run_id"].astype(str))
+            out = frame["run_id"].astype(str).map(by_run["experiment"])
+        if "train_key" in frame.columns and "train_key" in evals.columns:
+            firsts = evals.dropna(subset=["train_key"]).drop_duplicates("train_key")
+            by_key = pd.Series(firsts["experiment"].to_numpy(), index=firsts["train_key"].astype(str))
+            out = out.fillna(frame["train_key"].astype(str).map(by_key))
+    if "run_id" in frame.columns and "run_id" in data.runs.columns:
+        own = pd.Series(run_experiments(data.runs).to_numpy(), index=data.runs["run_id"].astype(str))
+        own = own[~own.index.duplicated()]
+        out = out.fillna(frame["run_id"].astype(str).map(own))
+    return out.fillna(UNKNOWN_EXPERIMENT).astype(str)
+
+
+def _keys(data: StoreData, frame: pd.DataFrame) -> pd.Series:
+    return frame["model"].astype(str) + "\x00" + _presets(data, frame)
+
+
+def _cells(data: StoreData) -> set[tuple[str, str]]:
+    """The (model, preset) cells `data` holds runs of."""
+    found: set[tuple[str, str]] = set()
     for name in _TABLES:
         frame: pd.DataFrame = getattr(data, name)
         if "model" in frame.columns:
-            found |= {str(m) for m in frame["model"].dropna().unique()}
+            rows = frame[frame["model"].notna()]
+            found |= set(zip(rows["model"].astype(str), _presets(data, rows), strict=True))
     return found
 
 
-def _without(data: StoreData, models: set[str]) -> dict[str, pd.DataFrame]:
+def _without(data: StoreData, cells: set[tuple[str, str]]) -> dict[str, pd.DataFrame]:
     out = {}
+    keys = {f"{model}\x00{preset}" for model, preset in cells}
     for name in _TABLES:
         frame: pd.DataFrame = getattr(data, name)
-        if "model" in frame.columns and models:
-            frame = frame[~frame["model"].astype("string").isin(sorted(models)).fillna(False)]
+        if "model" in frame.columns and cells:
+            frame = frame[~_keys(data, frame).isin(keys)]
         out[name] = frame
     return out
 
@@ -42,7 +74,8 @@ def _unique_join(values: list[str]) -> str:
 
 
 def combine(parts: list[StoreData]) -> StoreData:
-    """`parts` as one StoreData; a model held by a later part replaces that model's runs of earlier parts."""
+    """`parts` as one StoreData; a (model, preset) cell held by a later part replaces that cell's runs of
+    earlier parts."""
     if not parts:
         raise ValueError("combine needs at least one source")
     if len(parts) == 1:
@@ -52,12 +85,14 @@ def combine(parts: list[StoreData]) -> StoreData:
     configs: dict[str, str] = {}
     dropped: list[str] = []
     for i, part in enumerate(parts):
-        later = set().union(*(_models(p) for p in parts[i + 1:]))
-        replaced = sorted(_models(part) & later)
-        for model in replaced:
-            dropped.append(f"model {model} of {names[i]} replaced by a later source's runs of it")
+        later = set().union(*(_cells(p) for p in parts[i + 1:]))
+        replaced = sorted(_cells(part) & later)
+        for model, preset in replaced:
+            at = "" if preset == UNKNOWN_EXPERIMENT else f" ({preset})"
+            dropped.append(f"model {model}{at} of {names[i]} replaced by a later source's runs of it")
         kept.append(_without(part, set(replaced)))
-        configs.update({m: text for m, text in part.configs.items() if m not in later})
+        later_models = set().union(*(set(p.configs) for p in parts[i + 1:]))
+        configs.update({m: text for m, text in part.configs.items() if m not in later_models})
         dropped += part.dropped
     tables = {}
     for name in _TABLES:

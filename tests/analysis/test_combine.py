@@ -53,7 +53,27 @@ def test_a_later_source_replaces_a_model_whole_and_says_so() -> None:
     assert set(both.runs[both.runs["model"] == "proposed"]["git_commit"]) == {"rerun"}
     assert set(both.curves[both.curves["model"] == "proposed"]["run_id"]) == set(rerun.curves["run_id"])
     assert both.configs["proposed"] == rerun.configs["proposed"] and "# grid" in both.configs["min"]
-    assert both.dropped == ["model proposed of grid replaced by a later source's runs of it"]
+    assert both.dropped == ["model proposed (synthetic) of grid replaced by a later source's runs of it"]
+
+
+def test_the_same_model_at_another_preset_is_kept_beside_it() -> None:
+    # A rung of the scale ladder (paper_steps) published beside the quick grid: nothing is replaced.
+    grid = data_of(("proposed", "human"), "grid")
+    rung = data_of(("proposed",), "rung", rng_seed=11)
+    rung.runs = rung.runs.assign(**{"params.experiment.name": "paper_steps"})
+    rung.evals = rung.evals.assign(experiment="paper_steps")
+    grid.evals = grid.evals.assign(experiment="quick")
+    grid.runs = grid.runs.assign(**{"params.experiment.name": "quick"})
+    both = combine([grid, rung])
+    assert both.dropped == []
+    for name in ("runs", "curves", "evals", "episodes"):
+        assert len(getattr(both, name)) == len(getattr(grid, name)) + len(getattr(rung, name)), name
+    assert both.evals.groupby("experiment")["model"].apply(set).to_dict() == {
+        "quick": {"proposed", "human"}, "paper_steps": {"proposed"}}
+    # The rung published again replaces only itself, and says at which preset.
+    again = combine([both, rung])
+    assert len(again.evals) == len(both.evals)
+    assert again.dropped == ["model proposed (paper_steps) of grid + rung replaced by a later source's runs of it"]
 
 
 def test_one_source_is_itself() -> None:
