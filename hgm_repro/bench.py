@@ -25,6 +25,7 @@ from typing import Any
 import torch
 
 from .contracts.config_files import observation_config, scenario_config, simulator_config
+from .contracts.runtime_choice import bf16_supported
 from .simulator import HOST, HighwaySimulator
 
 OBS_VARIANTS = {  # name -> the model streams it stands for
@@ -383,6 +384,8 @@ TRAINING_PATHS = {
     # The preset as the main job runs it: the baseline's algorithm with torch's threads on every core
     # the job may use (runtime.torch_threads: 0), float32 (runtime.update_dtype: auto on a CPU).
     "default": (),
+    # The default with the update's forward passes in bf16 autocast (opt-in on a CPU with native bf16).
+    "bf16": ("runtime.update_dtype=bfloat16",),
     # The opt-in overlap: the next batch collected in a second thread while this one trains.
     "overlap": ("runtime.update_dtype=float32", "runtime.overlap=true", "runtime.torch_threads=1"),
 }
@@ -432,27 +435,30 @@ def bench_precision(device: torch.device, preset: str, seconds: float, rounds: i
     """Updates per second of one member's update (`preset`'s network and batch size) in float32 and
     bf16 autocast, each with and without channels_last weights and inputs; the variants take turns
     for `rounds` rounds so that a busy machine slows them alike, and each line gives its median round."""
-    job = _compose(f"experiment={preset}", f"device={device}", "runtime.update_dtype=float32")
+    # Each variant is the learner's own update, built with its runtime.update_dtype (an autocast around it
+    # from here would be switched off by the update's own, which follows that setting).
+    jobs = {p: _compose(f"experiment={preset}", f"device={device}",
+                        f"runtime.update_dtype={'bfloat16' if p.startswith('bf16') else 'float32'}")
+            for p in PRECISIONS}
+    job = jobs["float32"]
     batch = _update_batch(job, device, torch.Generator(device=device).manual_seed(0))
     steps = {}
     for precision in PRECISIONS:
-        update, net = _member_update(job, device)
+        update, net = _member_update(jobs[precision], device)
         if precision.endswith("channels_last"):
             net.to(memory_format=torch.channels_last)
         steps[precision] = update
     rates: dict[str, list[float]] = {p: [] for p in PRECISIONS}
     for _ in range(rounds):
         for precision, update in steps.items():
-            bf16 = precision.startswith("bf16")
             channels_last = precision.endswith("channels_last")
 
-            def one_update(update=update, bf16=bf16, channels_last=channels_last) -> None:
+            def one_update(update=update, channels_last=channels_last) -> None:
                 sample = batch.clone()
                 if channels_last:
                     sample = sample.apply(lambda x: x.contiguous(memory_format=torch.channels_last) if x.dim() == 4
                                           else x)
-                with torch.autocast(device.type, dtype=torch.bfloat16, enabled=bf16):
-                    update(sample)
+                update(sample)
 
             calls, elapsed = _timed(one_update, device, seconds / rounds)
             rates[precision].append(calls / elapsed)
@@ -647,6 +653,8 @@ def main(argv: list[str] | None = None) -> int:
             # One run, the paths in turn, twice: a busy machine slows both alike.
             for _ in range(2):
                 for path in TRAINING_PATHS:
+                    if path == "bf16" and not bf16_supported(device):
+                        continue  # refused where the device has no native bf16
                     print(f"training, quick preset, {path} path, on {device}...", file=sys.stderr)
                     emit(bench_training(device, path, total_steps=args.training_steps))
         if "precision" in parts:
