@@ -29,8 +29,9 @@ def _presets(data: StoreData, frame: pd.DataFrame) -> pd.Series:
     out = pd.Series(pd.NA, index=frame.index, dtype=object)
     if "experiment" in evals.columns:
         if "run_id" in frame.columns and "run_id" in evals.columns:
-            by_run = evals.drop_duplicates("run_id").set_index(evals.drop_duplicates("run_id")["run_id"].astype(str))
-            out = frame["run_id"].astype(str).map(by_run["experiment"])
+            firsts = evals.drop_duplicates("run_id")
+            by_run = pd.Series(firsts["experiment"].to_numpy(), index=firsts["run_id"].astype(str))
+            out = frame["run_id"].astype(str).map(by_run)
         if "train_key" in frame.columns and "train_key" in evals.columns:
             firsts = evals.dropna(subset=["train_key"]).drop_duplicates("train_key")
             by_key = pd.Series(firsts["experiment"].to_numpy(), index=firsts["train_key"].astype(str))
