@@ -20,8 +20,11 @@ GUARDED = {"proposed_guarded": "proposed", "min_guarded": "min", "coordinate_gua
 # A network trained without the layer and tested under it (eval.host_safety_layer): a probe, not a method.
 LAYER_AT_TEST = {"proposed_layer_at_test": "proposed", "min_layer_at_test": "min",
                  "coordinate_layer_at_test": "coordinate"}
-MODEL_ORDER = ("proposed", "min", "coordinate", "proposed_enriched", *GUARDED, *LAYER_AT_TEST, "human", "idm_mobil",
-               "idm_mobil_limits", "idm_limits", "random")
+# The same training tested from its safest kept validation pass (eval.checkpoint=safest), beside the test
+# of the preset's own network: a choice of network, not a method; named after the host it was chosen for.
+SAFEST = {f"{host}_safest": host for host in (*LEARNED, *GUARDED)}
+MODEL_ORDER = ("proposed", "min", "coordinate", "proposed_enriched", *GUARDED, *LAYER_AT_TEST, *SAFEST, "human",
+               "idm_mobil", "idm_mobil_limits", "idm_limits", "random")
 MODEL_LABELS = {
     "proposed": "Proposed (HGM + camera)",
     "min": "Min (camera only)",
@@ -39,17 +42,21 @@ MODEL_LABELS = {
     "idm_limits": "IDM lane keeping inside the host's limits",
     "random": "Random host",
 }
+MODEL_LABELS.update({name: f"{MODEL_LABELS[host]}, tested from its safest network" for name, host in SAFEST.items()})
 SHORT_LABELS = {"proposed": "Proposed", "min": "Min", "coordinate": "Coordinate",
                 "proposed_enriched": "Variant: enriched HGM", "proposed_guarded": "Proposed (guarded)",
                 "min_guarded": "Min (guarded)", "coordinate_guarded": "Coordinate (guarded)",
                 "proposed_layer_at_test": "Proposed (layer at test)", "min_layer_at_test": "Min (layer at test)",
                 "coordinate_layer_at_test": "Coordinate (layer at test)", "human": "Human", "idm_mobil": "IDM+MOBIL",
                 "idm_mobil_limits": "IDM+MOBIL (host limits)", "idm_limits": "IDM (host limits)", "random": "Random"}
+SHORT_LABELS.update({name: f"{SHORT_LABELS[host]} (safest)" for name, host in SAFEST.items()})
 PALETTE = {"proposed": "#1b6ca8", "min": "#d1495b", "coordinate": "#2e933c", "proposed_enriched": "#e7298a",
            "proposed_guarded": "#0b3c61", "min_guarded": "#8a1f30", "coordinate_guarded": "#175c22",
            "proposed_layer_at_test": "#7f9db9", "min_layer_at_test": "#e3a1aa", "coordinate_layer_at_test": "#94c99c",
            "human": "#555555", "idm_mobil": "#8c5fbf", "idm_mobil_limits": "#e08a1e", "idm_limits": "#c9a227",
            "random": "#b08d57"}
+# A safest network is drawn in its host's colour, paler.
+PALETTE.update({name: PALETTE[host] + "99" for name, host in SAFEST.items()})
 
 # The paper's test scenarios (Table 5), in its order; their traffic mix is what the runs logged
 # (analysis/scenarios.py).

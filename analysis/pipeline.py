@@ -10,7 +10,7 @@ import numpy as np
 import pandas as pd
 import yaml
 
-from analysis import crashes, equal_terms, ladder, tables
+from analysis import crashes, equal_terms, ladder, safest, tables
 from analysis.claims import claims_table, evaluate_claims
 from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
@@ -254,8 +254,8 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     for name, frame in (("scale_ladder.csv", ladder_numbers), ("scale_ladder_claims.csv", ladder_verdicts)):
         frame.to_csv(out_dir / name, index=False, float_format="%.6g")
         csvs.append(out_dir / name)
-    sections = [s for s in (ladder_section, equal_terms.section(evals, data.curves, results), crash_section)
-                if s is not None]
+    sections = [s for s in (ladder_section, equal_terms.section(evals, data.curves, results), crash_section,
+                            safest.section(evals, data.runs)) if s is not None]
 
     configs, configs_note = config_differences(data.configs)
     inputs = ReportInputs(

@@ -173,6 +173,13 @@ def evaluate_and_log(
     if done is not None:
         log.info("evaluation %s already finished in run %s: not repeated", key, done.info.run_id)
         return done.info.run_id, {k: v for k, v in done.data.metrics.items() if k.startswith("eval/")}
+    safest_record = None
+    if job.eval.checkpoint == "safest" and checkpoint is not None:
+        from ..evaluation.safest import choose_safest
+
+        # Chosen before the run opens: a training with no pass under the bar is refused with its message
+        # and leaves no failed run in the store.
+        checkpoint, safest_record = choose_safest(job, checkpoint.parent)
     eval_tags = {**run_tags(job, train_key(job)), "stage": "eval", "scenario": job.scenario.name,
                  "training": training.how, "evaluation_version": EVALUATION_VERSION, "evaluation_key": key}
     if training.run_id:
@@ -180,7 +187,7 @@ def evaluate_and_log(
     # A learned host tested under the layer it trained without is named so, never as the method.
     eval_tags["model"] = results_model_name(job)
     if checkpoint is not None:
-        eval_tags["checkpoint"] = checkpoint.stem  # final or best
+        eval_tags["checkpoint"] = checkpoint.stem  # final, best, ema, reselected or safest
     name = f"{results_model_name(job)} seed{job.seed} {scenario_label(job.scenario.name)} eval"
     link = tracker.run_link(training.run_id, f"training run {training.run_id[:8]}") if training.run_id else None
     description = evaluation_description(job, training.how, link, checkpoint)
@@ -194,12 +201,9 @@ def evaluate_and_log(
             checkpoint, record = reselect(job, checkpoint.parent)
             tracker.log_text(run_id, json.dumps(record, indent=2), RESELECTION_RECORD)
             tracker.set_tags(run_id, {"reselected_env_steps": record["chosen_env_steps"]})
-        if job.eval.checkpoint == "safest" and checkpoint is not None:
-            from ..evaluation.safest import choose_safest
-
-            checkpoint, record = choose_safest(job, checkpoint.parent)
-            tracker.log_text(run_id, json.dumps(record, indent=2), SAFEST_RECORD)
-            tracker.set_tags(run_id, {"safest_env_steps": record["chosen_env_steps"]})
+        if safest_record is not None:
+            tracker.log_text(run_id, json.dumps(safest_record, indent=2), SAFEST_RECORD)
+            tracker.set_tags(run_id, {"safest_env_steps": safest_record["chosen_env_steps"]})
         with tracker.system_metrics(run_id, job.tracking.system_metrics):
             result = evaluate_fn(job, job.scenario, checkpoint)
         means = {k: float(v) for k, v in result.means.items()}

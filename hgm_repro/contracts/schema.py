@@ -203,12 +203,17 @@ class JobConfig:
 # What a test of a learned host under the layer only at test (eval.host_safety_layer) is called in its
 # results: never the name of the model it trained as, whose results mean the paper's setting.
 LAYER_AT_TEST_SUFFIX = "_layer_at_test"
+# What a test of the safest kept validation pass (eval.checkpoint=safest) is called in its results: it sits
+# beside the same training's test of the preset's own network, never in its place.
+SAFEST_SUFFIX = "_safest"
 
 
 def results_model_name(job: JobConfig) -> str:
-    """The model a test's run and results are named by: `job.model.name`, or `<name>_layer_at_test`
-    when a learned host trained without the safety layer is tested under it."""
-    return job.model.name + (LAYER_AT_TEST_SUFFIX if job.eval.host_safety_layer else "")
+    """The model a test's run and results are named by: `job.model.name`, then `_layer_at_test` when a
+    learned host trained without the safety layer is tested under it, then `_safest` when the test drives
+    the safest kept validation pass."""
+    name = job.model.name + (LAYER_AT_TEST_SUFFIX if job.eval.host_safety_layer else "")
+    return name + (SAFEST_SUFFIX if job.eval.checkpoint == "safest" else "")
 
 
 def _type_name(tp: Any) -> str:

@@ -102,4 +102,11 @@ def test_a_job_tests_the_safest_pass_and_the_probe_reuses_the_training_under_its
     assert probe.training.run_id == outcome.training.run_id
     run = tracker.get_run(probe.eval_run_id)
     assert run.data.tags["model"] == "proposed_layer_at_test" and run.info.run_name.startswith("proposed_layer_at_test")
-    assert tracker.get_run(outcome.eval_run_id).data.tags["model"] == "proposed"
+    # The safest test sits beside the training's other tests under a name of its own.
+    tested = tracker.get_run(outcome.eval_run_id)
+    assert tested.data.tags["model"] == "proposed_safest" and tested.info.run_name.startswith("proposed_safest ")
+    # A bar no pass is under: refused with the message, before a run opens (no failed run in the store).
+    evals_before = len(tracker.client.search_runs([tested.info.experiment_id], "tags.stage = 'eval'"))
+    with pytest.raises(ConfigError, match="no validation pass .* stays under eval.safest_max_collisions=0"):
+        run_job(compose_cfg(*job_keep, "eval.safest_max_collisions=0"), tmp_path)
+    assert len(tracker.client.search_runs([tested.info.experiment_id], "tags.stage = 'eval'")) == evals_before

@@ -1,0 +1,70 @@
+#!/usr/bin/env bash
+# One rung of the scale ladder (experiment=paper_steps or experiment=paper_pixels) trained and tested in
+# parts that each fit a session: the sweep runs for MINUTES, then every job is stopped with SIGTERM (each
+# writes last.pt and marks its runs KILLED), and what a later session needs to go on is kept in
+# research/studies/ladder_state/RUNG/, which is committed: the store's database, its small artifacts and
+# each training's checkpoints. The replay memory is not kept (runtime.checkpoint_buffer_max_mb=0): a
+# resumed training refills it before it learns again, so it is not the run an uninterrupted one would be
+# (docs/usage.md, "Interrupting and resuming"). Run the same command in the next session: the state is
+# restored into the store (research/studies/runs/ladder/RUNG/, not committed) and the sweep goes on;
+# finished trainings and tests are not redone.
+#
+#   bash research/studies/ladder.sh RUNG MINUTES [Hydra overrides]
+#   bash research/studies/ladder.sh paper_pixels 150 model=proposed seed=0,1   # the proposed host's seeds first
+#
+# Without overrides the sweep is the rung's whole row for the proposed host: scenarios 1-5 x seeds 0-4,
+# two jobs at once (seed varies fastest, so the first jobs are the trainings). The rung is published
+# beside the quick grid with `python -m analysis --bundle docs/results research/studies/runs/ladder/RUNG/bundle
+# --write-bundle docs/results --out docs/results/report` after `python -m analysis --write-bundle bundle
+# --no-report` in the store.
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+rung=${1:-}
+minutes=${2:-}
+case "$rung" in
+  paper_steps | paper_pixels) ;;
+  *) echo "ladder.sh: rung '${rung}' is not one of: paper_steps paper_pixels" >&2; exit 2 ;;
+esac
+if ! [[ "$minutes" =~ ^[0-9]+$ ]] || [ "$minutes" -lt 1 ]; then
+  echo "ladder.sh: MINUTES '${minutes}' must be a whole number of minutes, at least 1" >&2
+  exit 2
+fi
+shift 2
+ROOT=$PWD
+STORE=$ROOT/research/studies/runs/ladder/$rung
+STATE=$ROOT/research/studies/ladder_state/$rung
+mkdir -p "$STORE"
+
+# Restore: a store that is not here (a new machine, a new session) starts from the committed state.
+if [ -d "$STATE" ] && [ ! -f "$STORE/mlflow.db" ]; then
+  cp -a "$STATE/mlflow.db" "$STORE/"
+  [ -d "$STATE/artifacts" ] && mkdir -p "$STORE/mlartifacts" && cp -a "$STATE/artifacts/." "$STORE/mlartifacts/"
+  [ -d "$STATE/trainings" ] && mkdir -p "$STORE/checkpoints" && cp -a "$STATE/trainings/." "$STORE/checkpoints/"
+  echo "ladder.sh: restored $rung from $STATE"
+fi
+
+cd "$STORE"
+log="sweep-$(date -u +%Y%m%dT%H%M%S).log"
+# Its own process group, so that the stop reaches the joblib workers too.
+setsid python -m hgm_repro -m "experiment=$rung" "scenario='1','2','3','4','5'" model=proposed seed=0,1,2,3,4 \
+  launcher=joblib runtime.checkpoint_buffer_max_mb=0 "$@" >"$log" 2>&1 &
+sweep=$!
+(sleep $((minutes * 60)) && kill -TERM -- "-$sweep" 2>/dev/null) &
+timer=$!
+status=0
+wait "$sweep" || status=$?
+kill "$timer" 2>/dev/null || true
+echo "ladder.sh: the sweep ended with status $status after at most $minutes minutes (log: $STORE/$log)"
+
+# Keep: the database, artifacts under 2 MB but the networks (configs, episode tables, records), every training's
+# checkpoints (the replay memory is not in them).
+rm -rf "$STATE.new"
+mkdir -p "$STATE.new/artifacts" "$STATE.new/trainings"
+sqlite3 mlflow.db ".backup '$STATE.new/mlflow.db'" 2>/dev/null || cp mlflow.db "$STATE.new/mlflow.db"
+[ -d mlartifacts ] && rsync -a --max-size=2m --exclude='*.pt' --exclude='*.pth' --exclude='*.gif' mlartifacts/ "$STATE.new/artifacts/"
+[ -d checkpoints ] && rsync -a --include='*/' --include='*.pt' --include=mlflow_run_id --include='*.json' \
+  --exclude='*' --prune-empty-dirs checkpoints/ "$STATE.new/trainings/"
+rm -rf "$STATE"
+mv "$STATE.new" "$STATE"
+du -sh "$STATE"
+echo "ladder.sh: commit $STATE to carry the rung to the next session"
