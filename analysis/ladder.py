@@ -45,6 +45,7 @@ class Rung:
     evals: pd.DataFrame
     curves: pd.DataFrame
     episodes: pd.DataFrame
+    runs: pd.DataFrame | None = None
 
     @property
     def ran(self) -> bool:
@@ -63,9 +64,10 @@ def _reference_rows(evals: pd.DataFrame, rung: str) -> pd.DataFrame:
     return rows[rows["experiment"] == main_experiments(rows)[REFERENCE]]
 
 
-def rung(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame, name: str) -> Rung:
-    """The runs of rung `name` (evals with the `experiment` column; curves and episodes as `StoreData` holds
-    them): the learned methods' training curves are those of the trainings its evaluation runs tested."""
+def rung(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame, name: str,
+         runs: pd.DataFrame | None = None) -> Rung:
+    """The runs of rung `name` (evals with the `experiment` column; curves, episodes and runs as `StoreData`
+    holds them): the learned methods' training curves are those of the trainings its evaluation runs tested."""
     learned = evals[evals["model"].isin(LEARNED) & (evals["experiment"] == name)]
     rows = pd.concat([learned, _reference_rows(evals, name)], ignore_index=True)
     keys = set(learned["train_key"].dropna())
@@ -73,12 +75,35 @@ def rung(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame, name
         else curves
     rung_episodes = episodes[episodes["run_id"].isin(set(rows["run_id"]))] if "run_id" in episodes else episodes
     return Rung(name, RUNGS.get(name, name), rows, rung_curves.reset_index(drop=True),
-                rung_episodes.reset_index(drop=True))
+                rung_episodes.reset_index(drop=True), runs)
 
 
-def rungs(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame) -> list[Rung]:
+def rungs(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
+          runs: pd.DataFrame | None = None) -> list[Rung]:
     """Every rung of the ladder, lowest first, run or not."""
-    return [rung(evals, curves, episodes, name) for name in RUNGS]
+    return [rung(evals, curves, episodes, name, runs) for name in RUNGS]
+
+
+def training_costs(curves: pd.DataFrame, runs: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Per training (`train_key`): the hours it trained, summed over its logged intervals (env steps between
+    two log points over the rate logged at the second), so that a training stopped and resumed in another
+    session counts only its training time; and how many times it was resumed (its run's `resumes` tag)."""
+    columns = ["train_key", "hours", "stops"]
+    if curves.empty or "steps_per_s" not in set(curves["metric"]):
+        return pd.DataFrame(columns=columns)
+    rates = curves[curves["metric"] == "steps_per_s"].sort_values(["train_key", "step"])
+    out = []
+    for key, group in rates.groupby("train_key"):
+        steps = group["step"].astype(float).to_numpy()
+        gaps = steps - pd.Series(steps).shift(fill_value=0.0).to_numpy()
+        out.append({"train_key": key, "hours": float((gaps / group["value"].astype(float).to_numpy()).sum() / 3600)})
+    costs = pd.DataFrame(out, columns=["train_key", "hours"])
+    stops = pd.Series(dtype=float)
+    if runs is not None and {"resumes", "train_key", "stage"} <= set(runs.columns):
+        trained = runs[runs["stage"] == "train"]
+        stops = pd.to_numeric(trained.set_index("train_key")["resumes"], errors="coerce").groupby(level=0).max()
+    costs["stops"] = costs["train_key"].map(stops).fillna(0).astype(int)
+    return costs[columns]
 
 
 def method_rows(r: Rung) -> pd.DataFrame:
@@ -89,6 +114,7 @@ def method_rows(r: Rung) -> pd.DataFrame:
     beating = seeds_beating(r.evals, REFERENCE, SCENARIOS, episodes=r.episodes)
     counts = beating.set_index("model")
     words = beating_grid(beating, SCENARIOS)[HEADLINE_SCENARIO] if not beating.empty else pd.Series(dtype=str)
+    costs = training_costs(r.curves, r.runs)
     out = []
     for model in (*LEARNED, REFERENCE):
         row: dict[str, object] = {"rung": r.name, "model": model}
@@ -102,6 +128,11 @@ def method_rows(r: Rung) -> pd.DataFrame:
         row["paired_seeds"] = int(counts.loc[model, "seeds"]) if model in counts.index else 0
         row["beating"] = int(counts.loc[model, "beating"]) if model in counts.index else 0
         row["beating_text"] = _beating_text(model, row, words)
+        keys = set(r.evals.loc[r.evals["model"] == model, "train_key"].dropna())
+        mine = costs[costs["train_key"].isin(keys)]
+        row["trainings"] = len(mine)
+        row["training_hours"] = float(mine["hours"].mean()) if len(mine) else float("nan")
+        row["stops"] = int(mine["stops"].sum())
         out.append(row)
     return pd.DataFrame(out)
 
@@ -126,13 +157,21 @@ def _beating_text(model: str, row: dict[str, object], words: pd.Series) -> str:
 def _table(r: Rung) -> list[list[str]]:
     head = ["Method", "Seeds", f"Return, scenario {HEADLINE_SCENARIO}",
             f"{METRIC_LABELS['collisions']}, scenario {HEADLINE_SCENARIO}",
-            f"Seeds beating the human-driven host, scenario {HEADLINE_SCENARIO}"]
+            f"Seeds beating the human-driven host, scenario {HEADLINE_SCENARIO}", "Hours per training (stops)"]
     rows = [head]
     for _, row in method_rows(r).iterrows():
         name = model_label(row["model"], short=True) + (" (every rung)" if row["model"] == REFERENCE else "")
         rows.append([name, str(row["seeds"]), _cell(row, "episode_return"), _cell(row, "collisions"),
-                     row["beating_text"]])
+                     row["beating_text"], _hours(row)])
     return rows
+
+
+def _hours(row: pd.Series) -> str:
+    if row["model"] == REFERENCE:
+        return "does not train"
+    if not row["trainings"]:
+        return "-"
+    return f"{row['training_hours']:.2f} ({row['stops']})"
 
 
 def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
@@ -142,11 +181,11 @@ def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
     return pd.DataFrame(columns, index=pd.Index(list(CLAIMS), name="claim"))
 
 
-def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame) -> tuple[Section, pd.DataFrame,
-                                                                                           pd.DataFrame]:
+def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
+            runs: pd.DataFrame | None = None) -> tuple[Section, pd.DataFrame, pd.DataFrame]:
     """The ladder as a report section, with its numbers (rung x method) and verdicts (claim x rung) as tables
     for CSV files."""
-    ladder = rungs(evals, curves, episodes)
+    ladder = rungs(evals, curves, episodes, runs)
     out = Section(TITLE)
     out.para("The same comparison at each rung of the paper's scale within this CPU's reach, lowest first. A "
              "rung is an experiment preset: its learned hosts were trained and tested with it. The human-driven "
@@ -155,13 +194,17 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame) -
              "enriched HGM, the guarded hosts) are left out. Return and collisions: per test episode in scenario "
              f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds]. A "
              f"seed beats the human-driven host when its return is higher on the same seed and scenario with under "
-             f"{SAFE_COLLISIONS:g} collisions per episode.")
+             f"{SAFE_COLLISIONS:g} collisions per episode. Hours per training: the mean over the method's "
+             "trainings of the time spent training (env steps over the logged rate, summed over the logged "
+             "intervals, so that a training stopped in one session and resumed in the next counts only its "
+             "training time; one torch thread per job, two jobs on this 2-core machine); stops: how many times "
+             "its trainings were stopped and resumed, each without its replay memory.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
             out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}.")
             continue
         out.para(f"Rung {i}, {r.name}: {r.label}.")
-        out.table(_table(r), widths=[1.5, 0.5, 1.4, 1.4, 1.7])
+        out.table(_table(r), widths=[1.4, 0.5, 1.3, 1.3, 1.5, 1.0])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
              "claims read the training curves of the networks the rung tested).")

@@ -25,6 +25,7 @@ from hgm_repro.contracts.names import current_key
 # else the `preset` tag every run of the app carries, else this.
 EXPERIMENT_PARAM = "params.experiment.name"
 PRESET_TAG = "preset"
+RESUMES_TAG = "resumes"  # on a training run: how many times it was stopped and resumed
 UNKNOWN_EXPERIMENT = "unknown"
 
 
@@ -134,7 +135,7 @@ def _runs_frame(client: MlflowClient, experiment_id: str) -> pd.DataFrame:
                 "start_time": run.info.start_time or 0,
                 "parent_run_id": tags.get("mlflow.parentRunId"),
             }
-            for tag in (*TAG_COLUMNS, PRESET_TAG):
+            for tag in (*TAG_COLUMNS, PRESET_TAG, RESUMES_TAG):
                 row[tag] = tags.get(tag)
             row.update({f"params.{current_key(k)}": v for k, v in run.data.params.items()})  # old names too
             row.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})

@@ -209,7 +209,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     out_dir.mkdir(parents=True, exist_ok=True)
     # The ladder reads every preset's runs; every other page one preset per model.
     ladder_section, ladder_numbers, ladder_verdicts = ladder.section(with_cv_ratio(data.evals, data.runs),
-                                                                     data.curves, data.episodes)
+                                                                     data.curves, data.episodes, data.runs)
     data = ladder.main_view(data)
     evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)

@@ -167,3 +167,16 @@ def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None
                                                                 "quick": True}
     # The main pages' claims read the quick runs only: claim 7 holds there as on the quick rung.
     assert pd.read_csv(ladder_report / "claims.csv")["verdict"].iloc[6] == SUPPORTED
+
+
+def test_training_hours_sum_the_logged_intervals_and_stops_come_from_the_resumes_tag() -> None:
+    # 2,000 steps at 100 steps/s, then 2,000 at 50 (a resumed session on a busier machine): 20 s + 40 s.
+    curves = pd.DataFrame({"train_key": ["a", "a", "b", "a"], "metric": ["steps_per_s", "steps_per_s", "steps_per_s",
+                                                                       "loss"],
+                           "step": [2000, 4000, 3600, 4000], "value": [100.0, 50.0, 1.0, 9.0]})
+    runs = pd.DataFrame({"train_key": ["a", "b", "a"], "stage": ["train", "train", "eval"],
+                         "resumes": ["2", None, None]})
+    costs = ladder.training_costs(curves, runs).set_index("train_key")
+    assert costs.loc["a", "hours"] == pytest.approx(60 / 3600) and costs.loc["b", "hours"] == pytest.approx(1.0)
+    assert (costs.loc["a", "stops"], costs.loc["b", "stops"]) == (2, 0)
+    assert ladder.training_costs(curves[curves["metric"] == "loss"]).empty
