@@ -18,6 +18,7 @@ from analysis.labels import (  # noqa: E402
     LEARNED,
     METRIC_LABELS,
     PALETTE,
+    PROBES,
     REFERENCE_HOSTS,
     SCENARIOS,
     model_label,
@@ -131,7 +132,7 @@ def training_figure(curves: pd.DataFrame, evals: pd.DataFrame, stem: Path) -> di
 
 def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
     """Mean and 95 % CI over seeds of each test metric per scenario (x = CV ratio), one line per method."""
-    data = evals[evals["scenario"].astype(str).isin(SCENARIOS)]
+    data = evals[evals["scenario"].astype(str).isin(SCENARIOS) & ~evals["model"].isin(PROBES)]
     if data.empty:
         return None
     _style()

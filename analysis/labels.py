@@ -23,6 +23,9 @@ LAYER_AT_TEST = {"proposed_layer_at_test": "proposed", "min_layer_at_test": "min
 # The same training tested from its safest kept validation pass (eval.checkpoint=safest), beside the test
 # of the preset's own network: a choice of network, not a method; named after the host it was chosen for.
 SAFEST = {f"{host}_safest": host for host in (*LEARNED, *GUARDED)}
+# Tests of a method's trainings under another test option (the layer at test, the safest network): each has
+# a section of its own; the hosts' figure and the first table leave them out.
+PROBES = (*LAYER_AT_TEST, *SAFEST)
 MODEL_ORDER = ("proposed", "min", "coordinate", "proposed_enriched", *GUARDED, *LAYER_AT_TEST, *SAFEST, "human",
                "idm_mobil", "idm_mobil_limits", "idm_limits", "random")
 MODEL_LABELS = {

@@ -9,7 +9,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.claims import ClaimResult, verdict_sentence
-from analysis.labels import METRIC_LABELS, SCENARIOS, model_label, ordered_models
+from analysis.labels import METRIC_LABELS, PROBES, SCENARIOS, model_label, ordered_models
 from analysis.report import HEADLINE_NOTE, fmt_estimate, headline_rows
 from analysis.scale import is_smoke, scale_lines
 from analysis.sections import Section, markdown_lines
@@ -62,7 +62,7 @@ def beating_lines(beating: pd.DataFrame, scenarios: list[str]) -> list[str]:
 
 def headline_lines(evals: pd.DataFrame, scenarios: list[str]) -> list[str]:
     """The headline table (return and collisions per host, scenario 3 and the mean of scenarios) in Markdown."""
-    rows = headline_rows(headline(evals, scenarios))
+    rows = headline_rows(headline(evals[~evals["model"].isin(PROBES)], scenarios))
     out = ["| " + " | ".join(rows[0]) + " |", "|---|---:|" + "---:|" * (len(rows[0]) - 2)]
     out += ["| " + " | ".join(row) + " |" for row in rows[1:]]
     return out

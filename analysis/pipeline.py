@@ -15,7 +15,7 @@ from analysis.claims import claims_table, evaluate_claims
 from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
 from analysis.figures import TRAINING_FIGURES, make_figures
-from analysis.labels import LEARNED, REFERENCE_HOSTS, SCENARIOS, fmt, model_label, ordered_models
+from analysis.labels import LEARNED, PROBES, REFERENCE_HOSTS, SCENARIOS, fmt, model_label, ordered_models
 from analysis.load import EVAL_METRICS, StoreData
 from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
@@ -267,7 +267,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         beating=tables.beating_grid(beating, scenarios) if not beating.empty else pd.DataFrame(),
         claims=results, discussion=discussion(results, counts, len(train_runs), evals),
         configs=configs, configs_note=configs_note,
-        headline=tables.headline(evals, scenarios), intervals=coverage_text(),
+        headline=tables.headline(evals[~evals["model"].isin(PROBES)], scenarios), intervals=coverage_text(),
         git_dirty=data.git_dirty, scenario_mix=scenario_mix(data.runs),
         train_keys=sorted(str(k) for k in train_runs["train_key"].dropna().unique()),
         scale=scale_lines(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
