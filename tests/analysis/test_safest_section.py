@@ -53,3 +53,10 @@ def test_the_table_puts_each_safest_row_under_its_host_and_the_section_names_the
                          safest.BAR_PARAM: ["0.05", "0.05"]})
     assert safest.bars(runs) == ["0.05"]
     assert "under 0.05 collisions per episode" in safest.section(evals(), runs).blocks[0].text
+
+
+def test_the_first_table_lists_hosts_and_leaves_the_probes_to_their_sections():
+    from analysis.markdown import headline_lines
+
+    text = "\n".join(headline_lines(evals(), ["1", "3"]))
+    assert "| Proposed |" in text and "| Human |" in text and "safest" not in text
