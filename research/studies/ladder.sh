@@ -31,8 +31,9 @@ if ! [[ "$minutes" =~ ^[0-9]+$ ]] || [ "$minutes" -lt 1 ]; then
 fi
 shift 2
 ROOT=$PWD
-STORE=$ROOT/research/studies/runs/ladder/$rung
-STATE=$ROOT/research/studies/ladder_state/$rung
+# LADDER_RUNS and LADDER_STATE move the store and the kept state (the script's tests use them).
+STORE=${LADDER_RUNS:-$ROOT/research/studies/runs/ladder}/$rung
+STATE=${LADDER_STATE:-$ROOT/research/studies/ladder_state}/$rung
 mkdir -p "$STORE"
 
 # Restore: a store that is not here (a new machine, a new session) starts from the committed state.

@@ -1,0 +1,53 @@
+"""The study scripts that outlast a session: their refusals of bad input, and the scale ladder's state
+carried across a stop and a new machine (a store that is gone, restored from the kept state)."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+STUDIES = Path(__file__).resolve().parents[2] / "studies"
+
+
+def run(script: str, *args: str, env: dict[str, str] | None = None, timeout: int = 60) -> subprocess.CompletedProcess:
+    return subprocess.run(["bash", str(STUDIES / script), *args], capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, **(env or {})})
+
+
+@pytest.mark.parametrize(("args", "said"), [
+    (("paper", "5"), "rung 'paper' is not one of: paper_steps paper_pixels"),
+    (("paper_steps", "soon"), "MINUTES 'soon' must be a whole number of minutes"),
+    (("paper_steps", "0"), "MINUTES '0' must be a whole number of minutes"),
+])
+def test_the_ladder_refuses_a_bad_rung_or_time(args, said):
+    done = run("ladder.sh", *args)
+    assert done.returncode == 2 and said in done.stderr
+
+
+def test_the_retest_names_the_models_it_knows():
+    done = run("retest_grid.sh", "proposed", "nosuch")
+    assert done.returncode == 2 and "model 'nosuch' has no config; allowed:" in done.stderr
+    assert "proposed_guarded" in done.stderr
+    assert run("retest_grid.sh").returncode == 2
+
+
+@pytest.mark.slow
+def test_a_rung_stopped_by_its_time_resumes_on_a_new_machine_from_the_kept_state(tmp_path):
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    tiny = ("learner.total_steps=40000", "learner.warmup_steps=100", "eval.test_steps=64", "eval.test_envs=4",
+            "seed=0", "scenario='3'", "logging.checkpoint_every=200", "tracking.log_gif=false")
+    first = run("ladder.sh", "paper_steps", "1", *tiny, env=env, timeout=240)
+    assert first.returncode == 0, first.stderr
+    assert "ended with status 143" in first.stdout  # stopped by its time, not finished
+    state = tmp_path / "state" / "paper_steps"
+    kept = sorted(p.name for p in (state / "trainings").glob("*/*"))
+    assert kept == ["last.pt", "mlflow_run_id"] and (state / "mlflow.db").is_file()
+    shutil.rmtree(tmp_path / "runs")  # a new machine: the store is gone
+    second = run("ladder.sh", "paper_steps", "1", *tiny, env=env, timeout=240)
+    assert second.returncode == 0 and "restored paper_steps" in second.stdout
+    log = next((tmp_path / "runs" / "paper_steps").glob("sweep-*.log")).read_text()
+    assert "resuming training run" in log
