@@ -11,6 +11,7 @@
 #
 #   bash research/studies/ladder.sh RUNG MINUTES [Hydra overrides]
 #   bash research/studies/ladder.sh paper_pixels 150 model=proposed seed=0,1   # the proposed host's seeds first
+#   LADDER_NICE=19 bash research/studies/ladder.sh paper_pixels 150 seed=0      # only on cores left idle
 #
 # Without overrides the sweep is the rung's whole row for the proposed host: scenarios 1-5 x seeds 0-4,
 # two jobs at once (seed varies fastest, so the first jobs are the trainings). The rung is published
@@ -50,6 +51,12 @@ log="sweep-$(date -u +%Y%m%dT%H%M%S).log"
 setsid python -m hgm_repro -m "experiment=$rung" "scenario='1','2','3','4','5'" model=proposed seed=0,1,2,3,4 \
   launcher=joblib runtime.checkpoint_buffer_max_mb=0 "$@" >"$log" 2>&1 &
 sweep=$!
+# LADDER_NICE=19: the rung takes only what other work leaves idle. Its own session is its own scheduler
+# autogroup, where `nice` alone would not yield to other sessions: the group's nice is what counts.
+if [ -n "${LADDER_NICE:-}" ]; then
+  echo "$LADDER_NICE" >"/proc/$sweep/autogroup" 2>/dev/null ||
+    echo "ladder.sh: could not lower the sweep's priority (no /proc/$sweep/autogroup); it runs at full share" >&2
+fi
 (sleep $((minutes * 60)) && kill -TERM -- "-$sweep" 2>/dev/null) &
 timer=$!
 status=0
