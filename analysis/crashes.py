@@ -29,6 +29,8 @@ from hgm_repro.contracts.events import (  # noqa: E402
 )
 
 TITLE = "Crash anatomy"
+KIND_WORDS = {"lane_change": "in a lane change", "rear_end": "rear-ends", "hit_from_behind": "hit from behind",
+              "other": "other"}
 KIND_COLOURS = {"lane_change": "#d1495b", "rear_end": "#1b6ca8", "hit_from_behind": "#e08a1e", "other": "#888888"}
 NOT_RECORDED = ("The crash anatomy is not recorded in these runs: their tests predate the per-episode event columns "
                 "(who ran into whom, lane changes before the crash). Test the trainings again to get it.")
@@ -79,6 +81,37 @@ def pooled(table: pd.DataFrame) -> pd.DataFrame:
     counts = table.groupby("model", sort=False)[["episodes", "crashes", *CRASH_KINDS]].sum().reset_index()
     counts["crashes_per_episode"] = counts["crashes"] / counts["episodes"]
     return counts
+
+
+def seed_shares(episodes: pd.DataFrame) -> pd.DataFrame:
+    """One row per host and seed that crashed (all scenarios pooled): `crashes` and each kind's share."""
+    rows = recorded(episodes)
+    if rows.empty or "seed" not in rows:
+        return pd.DataFrame(columns=["model", "seed", "crashes", *(f"{k}_share" for k in CRASH_KINDS)])
+    kinds = rows.assign(kind=crash_kind(rows)).dropna(subset=["kind"])
+    out = kinds.groupby(["model", "seed"])["kind"].value_counts(normalize=True).unstack(fill_value=0.0)
+    out = out.reindex(columns=list(CRASH_KINDS), fill_value=0.0).add_suffix("_share")
+    out.insert(0, "crashes", kinds.groupby(["model", "seed"]).size())
+    return out.reset_index()
+
+
+def host_sentences(table: pd.DataFrame, episodes: pd.DataFrame) -> list[str]:
+    """Per host that crashed: its crashes over all scenarios by kind, and how far the seeds differ in the
+    share of lane-change crashes (a seed that never changes lanes crashes otherwise)."""
+    shares = seed_shares(episodes)
+    out = []
+    for _, r in pooled(table[table["crashes"] > 0]).iterrows():
+        kinds = ", ".join(f"{int(r[k])} {KIND_WORDS[k]} ({r[k] / r['crashes']:.0%})"
+                          for k in CRASH_KINDS if r[k])
+        text = (f"{model_label(r['model'], short=True)}: {int(r['crashes'])} crashes in {int(r['episodes'])} test "
+                f"episodes ({r['crashes_per_episode']:.3f} per episode): {kinds}")
+        mine = shares[shares["model"] == r["model"]].sort_values("lane_change_share")
+        if len(mine) > 1:
+            low, high = mine.iloc[0], mine.iloc[-1]
+            text += (f". By seed, lane changes are {low['lane_change_share']:.0%} (seed {low['seed']}) to "
+                     f"{high['lane_change_share']:.0%} (seed {high['seed']}) of its crashes")
+        out.append(text + ".")
+    return out
 
 
 def figure(table: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
@@ -156,6 +189,8 @@ def section(episodes: pd.DataFrame, out_dir: Path) -> tuple[Section, pd.DataFram
         out.para("Not recorded for " + ", ".join(model_label(m) for m in ordered_models(old.unique())) + " (in "
                  f"{len(old)} of the {len(episodes)} test episodes): those tests predate the per-episode event "
                  "columns, and their crashes are not counted here. Test the trainings again to add them.")
+    for sentence in host_sentences(table, episodes):
+        out.para(sentence)
     paths = figure(table, out_dir / "fig_crash_anatomy")
     if paths is not None:
         out.figure(paths["png"], "Crashes per test episode by what led to them, per host (all scenarios, then each "

@@ -154,3 +154,16 @@ def test_the_report_and_results_md_carry_both_sections(guarded_report: Path):
     assert "fig_crash_anatomy.png" in markdown and (guarded_report / "fig_crash_anatomy.png").is_file()
     table = pd.read_csv(guarded_report / "crash_anatomy.csv")
     assert set(table["model"]) == set(GRID) and (table.loc[table["model"] == "human", "crashes"] == 0).all()
+
+
+def test_each_crashed_host_gets_its_kinds_pooled_and_the_spread_over_its_seeds():
+    frame = hand_built()
+    # A second seed of the proposed host whose one crash is a rear-end: its lane-change share is 0.
+    frame = pd.concat([frame, pd.DataFrame([{**episode("proposed", "3", 1, 0, crash_into_leader=1), "seed": 1}])],
+                      ignore_index=True)
+    said = crashes.host_sentences(crashes.anatomy(frame), frame)
+    assert said == ["Proposed: 5 crashes in 6 test episodes (0.833 per episode): 1 in a lane change (20%), "
+                    "2 rear-ends (40%), 1 hit from behind (20%), 1 other (20%). By seed, lane changes are 0% (seed 1) "
+                    "to 25% (seed 0) of its crashes."]
+    shares = crashes.seed_shares(frame).set_index(["model", "seed"])
+    assert shares.loc[("proposed", 1), "rear_end_share"] == 1.0 and shares.loc[("proposed", 0), "crashes"] == 4
