@@ -10,7 +10,7 @@ import pandas as pd
 from analysis.labels import SAFEST, fmt, model_label, ordered_models
 from analysis.sections import Section
 from analysis.stats import NO_DATA, Estimate, mean_ci, per_seed
-from analysis.tables import HEADLINE_SCENARIO, per_scenario
+from analysis.tables import HEADLINE_SCENARIO, NON_NEGATIVE, per_scenario
 
 TITLE = "The safest network beside best.pt"
 BAR_PARAM = "params.eval.safest_max_collisions"
@@ -25,12 +25,13 @@ def _series(evals: pd.DataFrame, model: str, metric: str, scenario: str | None) 
     return per_seed(strata) if strata else pd.Series(dtype=float)
 
 
-def _cell(est: Estimate, metric: str) -> str:
+def _cell(est: Estimate, metric: str, floor: bool = True) -> str:
     if est.n == 0:
         return "-"
     if not est.has_ci:
         return f"{fmt(est.point, metric)} (1 seed)"
-    return f"{fmt(est.point, metric)} [{fmt(est.low, metric)}, {fmt(est.high, metric)}]"
+    low = max(est.low, 0.0) if floor and metric in NON_NEGATIVE else est.low  # a mean of counts lies above 0
+    return f"{fmt(est.point, metric)} [{fmt(low, metric)}, {fmt(est.high, metric)}]"
 
 
 def paired(evals: pd.DataFrame, host: str, metric: str, scenario: str | None) -> Estimate:
@@ -75,8 +76,8 @@ def sentences(evals: pd.DataFrame, scenario: str = HEADLINE_SCENARIO) -> list[st
         label = model_label(host, short=True)
         ret, crashes = paired(evals, host, "episode_return", None), paired(evals, host, "collisions", None)
         text = (f"{label}: the safest network minus best.pt, over the {ret.n} seed{'s' if ret.n != 1 else ''} tested "
-                f"both ways and every scenario, changes the return by {_cell(ret, 'episode_return')} per episode "
-                f"and the collisions by {_cell(crashes, 'collisions')}")
+                f"both ways and every scenario, changes the return by {_cell(ret, 'episode_return', floor=False)} "
+                f"per episode and the collisions by {_cell(crashes, 'collisions', floor=False)}")
         trained = set(evals.loc[evals["model"] == host, "seed"])
         missing = sorted(trained - set(evals.loc[evals["model"] == name, "seed"]), key=str)
         if missing:

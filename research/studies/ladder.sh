@@ -74,5 +74,11 @@ sqlite3 mlflow.db ".backup '$STATE.new/mlflow.db'" 2>/dev/null || cp mlflow.db "
   --exclude='*' --prune-empty-dirs checkpoints/ "$STATE.new/trainings/"
 rm -rf "$STATE"
 mv "$STATE.new" "$STATE"
-du -sh "$STATE"
-echo "ladder.sh: commit $STATE to carry the rung to the next session"
+size_mb=$(du -sm "$STATE" | cut -f1)
+if [ "$size_mb" -gt "${LADDER_MAX_MB:-50}" ]; then
+  # A paper-sized network's last.pt (weights, target, Adam's moments) is over 100 MB: too large for git.
+  echo "ladder.sh: $STATE holds ${size_mb} MB, more than LADDER_MAX_MB=${LADDER_MAX_MB:-50}: too large to commit;" \
+    "carry it another way (or train this rung where it fits one session)" >&2
+else
+  echo "ladder.sh: commit $STATE (${size_mb} MB) to carry the rung to the next session"
+fi
