@@ -100,7 +100,7 @@ def section(evals: pd.DataFrame, runs: pd.DataFrame | None = None) -> Section | 
              f"256 validation episodes (the training traffic, seeds no test uses), and the best return {under} "
              "wins. Both are tested on the same test traffic, so the two rows of a host differ only in the network "
              "chosen. A choice of network, not a method: no claim reads it.")
-    out.table(table(evals), widths=[1.3, 1.2, 1.3, 1.1, 1.3, 1.1, 0.5])
+    out.table(table(evals), widths=[1.2, 1.1, 1.3, 1.1, 1.3, 1.1, 0.6])
     for sentence in sentences(evals):
         out.para(sentence)
     return out
