@@ -43,7 +43,13 @@ TABLE_FILES: dict[str, tuple[str, str]] = {
     "runs": ("runs.csv", "one row per kept train/eval run: run_id, run_name, status, start_time, "
                          f"parent_run_id, the tags ({', '.join(RUN_TAGS)}), params.<key> (the resolved "
                          "config) and metrics.<key> (last values)"),
+    "stopped": ("stopped.csv", "trainings a signal stopped before their last step, to be resumed: run_id, model, "
+                               "seed, experiment, train_key, step (the last env step logged), total_steps, steps_per_s "
+                               "(the rate logged there, per CPU second where logged), hours (spent training so "
+                               "far, CPU hours where logged), stops (times resumed so far)"),
 }
+# Tables a bundle of an earlier version may lack: read as empty.
+OPTIONAL_TABLES = {"stopped"}
 CONFIG_NOTE = f"{CONFIG_DIR}/<model>.yaml: each model's resolved config.yaml"
 MANIFEST_NOTE = (f"{MANIFEST}: format version, the source tracking URI (its file name only) and experiment, the "
                  "git commits, creation time, runs left out, and each file's rows and column dtypes")
@@ -199,7 +205,8 @@ def load_bundle(directory: Path | str) -> StoreData:
     try:
         listed = {field_name: (manifest["tables"][field_name]["file"], manifest["tables"][field_name]["columns"],
                                manifest["tables"][field_name].get("rows"))
-                  for field_name in TABLE_FILES}
+                  for field_name in TABLE_FILES
+                  if not (field_name in OPTIONAL_TABLES and field_name not in manifest["tables"])}
     except (KeyError, TypeError) as exc:
         raise BundleError(f"{manifest_path} lacks the entry {_first_line(exc)} of its tables: the bundle is "
                           "damaged; write it again") from exc

@@ -15,7 +15,7 @@ import pandas as pd
 from analysis.load import UNKNOWN_EXPERIMENT, StoreData, run_experiments
 
 # The StoreData tables, each with a `model` column.
-_TABLES = ("runs", "curves", "evals", "episodes")
+_TABLES = ("runs", "curves", "evals", "episodes", "stopped")
 
 
 def _presets(data: StoreData, frame: pd.DataFrame) -> pd.Series:

@@ -18,8 +18,9 @@ import dataclasses
 import pandas as pd
 
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
+from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, model_label
-from analysis.load import StoreData, main_experiments
+from analysis.load import StoreData, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
 from analysis.tables import HEADLINE_METRICS, HEADLINE_SCENARIO, SAFE_COLLISIONS, beating_grid, headline, seeds_beating
@@ -85,19 +86,14 @@ def rungs(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
 
 
 def training_costs(curves: pd.DataFrame, runs: pd.DataFrame | None = None) -> pd.DataFrame:
-    """Per training (`train_key`): the hours it trained, summed over its logged intervals (env steps between
-    two log points over the rate logged at the second), so that a training stopped and resumed in another
-    session counts only its training time; and how many times it was resumed (its run's `resumes` tag)."""
+    """Per training (`train_key`): the hours it trained (`analysis.costs.hours_trained`: a training stopped and
+    resumed in another session counts only its training time) and how many times it was resumed (its run's
+    `resumes` tag)."""
     columns = ["train_key", "hours", "stops"]
-    if curves.empty or "steps_per_s" not in set(curves["metric"]):
+    hours = hours_trained(curves)
+    if hours.empty:
         return pd.DataFrame(columns=columns)
-    rates = curves[curves["metric"] == "steps_per_s"].sort_values(["train_key", "step"])
-    out = []
-    for key, group in rates.groupby("train_key"):
-        steps = group["step"].astype(float).to_numpy()
-        gaps = steps - pd.Series(steps).shift(fill_value=0.0).to_numpy()
-        out.append({"train_key": key, "hours": float((gaps / group["value"].astype(float).to_numpy()).sum() / 3600)})
-    costs = pd.DataFrame(out, columns=["train_key", "hours"])
+    costs = pd.DataFrame({"train_key": hours.index, "hours": hours.to_numpy()})
     stops = pd.Series(dtype=float)
     if runs is not None and {"resumes", "train_key", "stage"} <= set(runs.columns):
         trained = runs[runs["stage"] == "train"]
@@ -157,7 +153,7 @@ def _beating_text(model: str, row: dict[str, object], words: pd.Series) -> str:
 def _table(r: Rung) -> list[list[str]]:
     head = ["Method", "Seeds", f"Return, scenario {HEADLINE_SCENARIO}",
             f"{METRIC_LABELS['collisions']}, scenario {HEADLINE_SCENARIO}",
-            f"Seeds beating the human-driven host, scenario {HEADLINE_SCENARIO}", "Hours per training (stops)"]
+            f"Seeds beating the human-driven host, scenario {HEADLINE_SCENARIO}", "CPU-hours per training (stops)"]
     rows = [head]
     for _, row in method_rows(r).iterrows():
         name = model_label(row["model"], short=True) + (" (every rung)" if row["model"] == REFERENCE else "")
@@ -174,6 +170,121 @@ def _hours(row: pd.Series) -> str:
     return f"{row['training_hours']:.2f} ({row['stops']})"
 
 
+TESTED, STOPPED, MISSING = "tested", "stopped", "missing"
+
+
+def expected_seeds(evals: pd.DataFrame) -> list[object]:
+    """The seeds every rung is to hold: those the human-driven host was tested on (it stands beside every
+    rung), else those of any learned method at any rung."""
+    for rows in (evals[evals["model"] == REFERENCE], evals[evals["model"].isin(LEARNED)]):
+        if not rows.empty:
+            return sorted(set(rows["seed"].dropna()), key=str)
+    return []
+
+
+def trainings(r: Rung, stopped: pd.DataFrame, seeds: list[object]) -> pd.DataFrame:
+    """One row per learned method and expected seed of rung `r`: its state (tested: an evaluation run of the
+    rung tested it; stopped: a signal stopped its training before the last step; missing: neither), the env
+    steps reached of the total where stopped, and the hours it trained (tested: its whole training)."""
+    costs = training_costs(r.curves, r.runs).set_index("train_key")
+    mine = stopped[stopped["experiment"] == r.name] if not stopped.empty else stopped
+    out = []
+    for model in LEARNED:
+        tested = r.evals[r.evals["model"] == model]
+        for seed in seeds:
+            row: dict[str, object] = {"rung": r.name, "model": model, "seed": seed, "state": MISSING,
+                                      "step": float("nan"), "total_steps": float("nan"),
+                                      "steps_per_s": float("nan"), "hours": float("nan"), "stops": 0}
+            keys = set(tested.loc[tested["seed"] == seed, "train_key"].dropna())
+            under_way = mine[(mine["model"] == model) & (mine["seed"] == seed)] if not mine.empty else mine
+            if keys:
+                row["state"] = TESTED
+                known = costs[costs.index.isin(keys)]
+                if len(known):
+                    row["hours"] = float(known["hours"].sum())
+                    row["stops"] = int(known["stops"].sum())
+            elif len(under_way):
+                first = under_way.iloc[0]
+                row.update(state=STOPPED, step=float(first["step"]), total_steps=float(first["total_steps"]),
+                           steps_per_s=float(first["steps_per_s"]), hours=float(first["hours"]),
+                           stops=int(first["stops"]))
+            out.append(row)
+    return pd.DataFrame(out, columns=["rung", "model", "seed", "state", "step", "total_steps", "steps_per_s",
+                                      "hours", "stops"])
+
+
+def _rest(row: pd.Series) -> float:
+    """Hours a stopped training still needs: its remaining steps at the rate it logged last (NaN if unknown)."""
+    if row["step"] > 0 and pd.notna(row["total_steps"]) and pd.notna(row["steps_per_s"]) and row["steps_per_s"] > 0:
+        return max(float(row["total_steps"] - row["step"]), 0.0) / float(row["steps_per_s"]) / 3600
+    return float("nan")
+
+
+def hours_per_training(states: pd.DataFrame) -> float:
+    """What one training of the rung takes, as measured here: the mean of its tested trainings' hours, else of
+    its stopped ones' hours so far plus their remaining steps at the rate each logged last; NaN when neither
+    was measured."""
+    done = states[(states["state"] == TESTED) & states["hours"].notna()]
+    if len(done):
+        return float(done["hours"].mean())
+    going = states[states["state"] == STOPPED]
+    whole = (going["hours"] + going.apply(_rest, axis=1)).dropna() if len(going) else pd.Series(dtype=float)
+    return float(whole.mean()) if len(whole) else float("nan")
+
+
+def hours_left(states: pd.DataFrame) -> float:
+    """Hours of training the rung still needs: each stopped training's remaining steps at the rate it logged
+    last (a whole training where that is unknown), and a whole training (`hours_per_training`) per missing one;
+    NaN when nothing on the rung was measured yet."""
+    per_training = hours_per_training(states)
+    rest = 0.0
+    for _, row in states[states["state"] == STOPPED].iterrows():
+        own = _rest(row)
+        rest += per_training if pd.isna(own) else own
+    return rest + per_training * int((states["state"] == MISSING).sum())
+
+
+def _seed_list(seeds: list[object]) -> str:
+    words = [str(s) for s in seeds]
+    return f"seed {words[0]}" if len(words) == 1 else f"seeds {', '.join(words[:-1])} and {words[-1]}"
+
+
+def _steps(value: float) -> str:
+    return f"{value / 1e6:g}M" if value >= 1e6 else f"{value / 1e3:.0f}k"
+
+
+def progress_text(states: pd.DataFrame) -> str:
+    """The rung's trainings in words: per method, the seeds tested, each stopped one's steps and hours, the
+    seeds missing; then the hours left."""
+    if states.empty:
+        return "No seeds to train: the store holds no human-driven run to pair with."
+    parts = []
+    for model, group in states.groupby("model", sort=False):
+        words = []
+        tested = list(group.loc[group["state"] == TESTED, "seed"])
+        if tested:
+            words.append(f"{_seed_list(tested)} tested")
+        for _, row in group[group["state"] == STOPPED].iterrows():
+            total = f" of {_steps(row['total_steps'])}" if pd.notna(row["total_steps"]) else ""
+            times = "once" if row["stops"] == 1 else f"{row['stops']} times"
+            resumed = f", resumed {times}" if row["stops"] else ""
+            words.append(f"seed {row['seed']} stopped at {_steps(row['step'])}{total} steps after "
+                         f"{row['hours']:.2f} CPU-hours of training{resumed}")
+        missing = list(group.loc[group["state"] == MISSING, "seed"])
+        if missing:
+            words.append(f"{_seed_list(missing)} missing")
+        parts.append(f"{model_label(str(model), short=True)}: {'; '.join(words)}")
+    text = "Trainings: " + ". ".join(parts) + "."
+    if (states["state"] == TESTED).all():
+        return text
+    per_training, left = hours_per_training(states), hours_left(states)
+    if pd.isna(per_training):
+        return text + " Left: every training; none has logged its rate yet, so the hours are not measured here."
+    return (text + f" Left: about {left:.0f} CPU-hours of training, at the {per_training:.1f} CPU-hours one "
+            "training takes as measured on this rung (its tested trainings, else a stopped one's hours so far and "
+            "the rest of its steps at the rate it logged last), and the tests.")
+
+
 def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
     """Claim x rung: each claim's verdict on the rung's runs alone, or 'not run'."""
     columns = {r.name: ({c.number: c.verdict for c in r.claims()} if r.ran else dict.fromkeys(CLAIMS, NOT_RUN))
@@ -182,10 +293,14 @@ def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
 
 
 def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
-            runs: pd.DataFrame | None = None) -> tuple[Section, pd.DataFrame, pd.DataFrame]:
-    """The ladder as a report section, with its numbers (rung x method) and verdicts (claim x rung) as tables
-    for CSV files."""
+            runs: pd.DataFrame | None = None, stopped: pd.DataFrame | None = None,
+            ) -> tuple[Section, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """The ladder as a report section, with its numbers (rung x method), verdicts (claim x rung) and trainings
+    (rung x method x seed: tested, stopped or missing) as tables for CSV files."""
     ladder = rungs(evals, curves, episodes, runs)
+    stopped = no_stopped() if stopped is None else stopped
+    seeds = expected_seeds(evals)
+    states = {r.name: trainings(r, stopped, seeds) for r in ladder}
     out = Section(TITLE)
     out.para("The same comparison at each rung of the paper's scale within this CPU's reach, lowest first. A "
              "rung is an experiment preset: its learned hosts were trained and tested with it. The human-driven "
@@ -194,16 +309,17 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "enriched HGM, the guarded hosts) are left out. Return and collisions: per test episode in scenario "
              f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds]. A "
              f"seed beats the human-driven host when its return is higher on the same seed and scenario with under "
-             f"{SAFE_COLLISIONS:g} collisions per episode. Hours per training: the mean over the method's "
-             "trainings of the time spent training (env steps over the logged rate, summed over the logged "
-             "intervals, so that a training stopped in one session and resumed in the next counts only its "
-             "training time; one torch thread per job, two jobs on this 2-core machine); stops: how many times "
+             f"{SAFE_COLLISIONS:g} collisions per episode. CPU-hours per training: the mean over the method's "
+             "trainings of the CPU time spent training (env steps over the rate logged per second of the training "
+             "process's CPU time, summed over the logged intervals, so that neither the other load on a shared "
+             "machine nor a stop between sessions counts; a training that logged only its wall-clock rate counts "
+             "its wall time; one torch thread per job, so a CPU-hour is a core-hour); stops: how many times "
              "its trainings were stopped and resumed, each without its replay memory.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
-            out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}.")
+            out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}. {progress_text(states[r.name])}")
             continue
-        out.para(f"Rung {i}, {r.name}: {r.label}.")
+        out.para(f"Rung {i}, {r.name}: {r.label}. {progress_text(states[r.name])}")
         out.table(_table(r), widths=[1.4, 0.5, 1.3, 1.3, 1.5, 1.0])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
@@ -212,7 +328,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
                *[[f"{n}. {CLAIMS[n]}", *[str(verdicts.loc[n, r.name]) for r in ladder]] for n in verdicts.index]],
               widths=[3.4, *[1.0] * len(ladder)])
     numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
-    return out, numbers, verdicts.reset_index()
+    return out, numbers, verdicts.reset_index(), pd.concat(list(states.values()), ignore_index=True)
 
 
 def main_view(data: StoreData) -> StoreData:

@@ -17,6 +17,7 @@ import pandas as pd
 from mlflow import MlflowClient
 from mlflow.entities import ViewType
 
+from analysis.costs import hours_trained, last_rate
 from hgm_repro.contracts.names import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
 from hgm_repro.contracts.names import RUN_TAGS as TAG_COLUMNS
 from hgm_repro.contracts.names import current_key
@@ -27,6 +28,18 @@ EXPERIMENT_PARAM = "params.experiment.name"
 PRESET_TAG = "preset"
 RESUMES_TAG = "resumes"  # on a training run: how many times it was stopped and resumed
 UNKNOWN_EXPERIMENT = "unknown"
+TOTAL_STEPS_PARAM = "params.learner.total_steps"
+# A training stopped before its last step, by a signal (its run KILLED, its last.pt resumes it): what it
+# reached and what it cost so far (`analysis.costs`: CPU hours where logged). `step`: the last env step it
+# logged; `steps_per_s`: the rate it logged there, per CPU second where logged (what the rest of it would go
+# at); `stops`: its runs' `resumes` tag.
+STOPPED_COLUMNS = ["run_id", "model", "seed", "experiment", "train_key", "step", "total_steps", "steps_per_s",
+                   "hours", "stops"]
+
+
+def no_stopped() -> pd.DataFrame:
+    """The stopped-trainings table with no rows."""
+    return pd.DataFrame(columns=STOPPED_COLUMNS)
 
 
 class EmptyStoreError(RuntimeError):
@@ -46,6 +59,7 @@ class StoreData:
     configs: dict[str, str] = field(default_factory=dict)  # model -> resolved config.yaml text
     dropped: list[str] = field(default_factory=list)  # why runs were left out (duplicates, failures)
     source: str = ""  # how the report names where the data came from; "" = the tracking store
+    stopped: pd.DataFrame = field(default_factory=no_stopped)  # STOPPED_COLUMNS: trainings under way
 
     def __post_init__(self) -> None:
         # Every source gets the evals' `experiment` column the same way, older bundles included.
@@ -289,6 +303,7 @@ def load_store(tracking_uri: str | None = None, experiment: str = "hgm_repro") -
     # Failed and killed runs hold partial results that would bias the means.
     bad = runs["status"].isin(["FAILED", "KILLED"])
     dropped = [f"{int(bad.sum())} FAILED/KILLED run(s) left out"] if bad.any() else []
+    stopped = _stopped(client, runs)
     runs = runs[~bad]
     # A model trained and tested at several presets keeps one run per cell of each.
     runs = runs.assign(experiment=run_experiments(runs))
@@ -302,4 +317,40 @@ def load_store(tracking_uri: str | None = None, experiment: str = "hgm_repro") -
     curves = _curves(client, train)
     kept = pd.concat([train, evals_runs], ignore_index=True)
     return StoreData(tracking_uri=uri, experiment=experiment, runs=kept, curves=curves, evals=evals,
-                     episodes=episodes, configs=configs, dropped=dropped)
+                     episodes=episodes, configs=configs, dropped=dropped, stopped=stopped)
+
+
+def _numbers(frame: pd.DataFrame, column: str) -> pd.Series:
+    """`frame[column]` as numbers (NaN where absent or not a number)."""
+    if column not in frame:
+        return pd.Series(np.nan, index=frame.index)
+    return pd.to_numeric(frame[column], errors="coerce")
+
+
+def _stopped(client: MlflowClient, runs: pd.DataFrame) -> pd.DataFrame:
+    """The trainings a signal stopped before their last step (KILLED training runs: each resumes from its
+    last.pt, in the same run), one per (model, seed, experiment preset), the latest; none that another run of
+    the same training finished."""
+    train = runs[runs["stage"] == "train"].assign(experiment=run_experiments(runs))
+    killed = train[train["status"] == "KILLED"]
+    finished = set(train.loc[train["status"] == "FINISHED", "train_key"].dropna())
+    killed = killed[~killed["train_key"].isin(finished)]
+    if killed.empty:
+        return no_stopped()
+    killed = killed.sort_values("start_time", ascending=False).drop_duplicates(["model", "seed", "experiment"])
+    curves = _curves(client, killed)
+    hours = hours_trained(curves)
+    last_step = curves.groupby("train_key")["step"].max() if not curves.empty else pd.Series(dtype=float)
+    out = pd.DataFrame({
+        "run_id": killed["run_id"].astype(str),
+        "model": killed["model"].astype(str),
+        "seed": killed["seed"],
+        "experiment": killed["experiment"].astype(str),
+        "train_key": killed["train_key"],
+        "step": killed["train_key"].map(last_step).fillna(0).astype(int),
+        "total_steps": _numbers(killed, TOTAL_STEPS_PARAM).astype(float),
+        "steps_per_s": killed["train_key"].map(last_rate(curves)).astype(float),
+        "hours": killed["train_key"].map(hours).fillna(0.0).astype(float),
+        "stops": _numbers(killed, RESUMES_TAG).fillna(0).astype(int),
+    }, columns=STOPPED_COLUMNS)
+    return out.sort_values(["experiment", "model", "seed"]).reset_index(drop=True)

@@ -208,8 +208,8 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     """Everything `python -m analysis` writes, from one loaded store."""
     out_dir.mkdir(parents=True, exist_ok=True)
     # The ladder reads every preset's runs; every other page one preset per model.
-    ladder_section, ladder_numbers, ladder_verdicts = ladder.section(with_cv_ratio(data.evals, data.runs),
-                                                                     data.curves, data.episodes, data.runs)
+    ladder_section, ladder_numbers, ladder_verdicts, ladder_trainings = ladder.section(
+        with_cv_ratio(data.evals, data.runs), data.curves, data.episodes, data.runs, data.stopped)
     data = ladder.main_view(data)
     evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)
@@ -251,7 +251,8 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         figures["crash_anatomy"] = crash_figure
     if not crash_table.empty:
         csvs.append(out_dir / "crash_anatomy.csv")
-    for name, frame in (("scale_ladder.csv", ladder_numbers), ("scale_ladder_claims.csv", ladder_verdicts)):
+    for name, frame in (("scale_ladder.csv", ladder_numbers), ("scale_ladder_claims.csv", ladder_verdicts),
+                        ("scale_ladder_trainings.csv", ladder_trainings)):
         frame.to_csv(out_dir / name, index=False, float_format="%.6g")
         csvs.append(out_dir / name)
     sections = [s for s in (ladder_section, equal_terms.section(evals, data.curves, results), crash_section,

@@ -19,6 +19,11 @@ REPORTED_METRICS = ("episode_return", *(m for m in EPISODE_METRICS if m not in (
 # since the last log).
 TRAINING_CURVE_METRICS = ("avg_speed_kmh", "lane_changes", "overtakes", "episode_return", "collisions")
 
+# The rates a training run logs as `train/<name>` at each log point: env steps per second of wall time, and per
+# second of the training process's CPU time (all its threads), which the other load on a shared machine does not
+# slow. They time the machine, not the training: two runs of one training differ in them and in nothing else.
+TRAINING_RATES = ("steps_per_s", "cpu_steps_per_s")
+
 # Tags every job run carries (architecture.md); analysis filters on them.
 RUN_TAGS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "git_dirty")
 

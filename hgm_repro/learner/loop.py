@@ -155,7 +155,8 @@ def _train_together(members: list[Member]) -> list[Path]:
     if count > 1:
         logger.info("grouped training: %d members of '%s' (seeds %s) in one process, %d envs each",
                     count, job0.model.name, seeds, n_envs)
-    last_log_steps, last_log_time = progress.env_steps, time.perf_counter()
+    # CPU time as well as wall time: on a shared machine the wall rate measures the other load too.
+    last_log_steps, last_log_time, last_log_cpu = progress.env_steps, time.perf_counter(), time.process_time()
     batches = iter(collector)
     prefetch = Prefetcher(batches) if overlap else None
 
@@ -189,15 +190,17 @@ def _train_together(members: list[Member]) -> list[Path]:
                                 speed_kmh=f"{members[0].recent_speed:.1f}", refresh=False)
 
             if progress.crossed(steps_before, log_every) or finished:
-                now = time.perf_counter()
+                now, cpu = time.perf_counter(), time.process_time()
                 rate = (progress.env_steps - last_log_steps) / max(now - last_log_time, 1e-9)
+                cpu_rate = (progress.env_steps - last_log_steps) / max(cpu - last_log_cpu, 1e-9)
                 validating = val_every > 0 and (progress.crossed(steps_before, val_every) or finished)
                 try:
-                    _log_interval(members, progress, total_steps, rate, validating, lines=bar.disable)
+                    _log_interval(members, progress, total_steps, rate, validating, lines=bar.disable,
+                                  cpu_rate=cpu_rate)
                 except JobInterrupted:  # stopped between validation steps: last.pt first, as below
                     _save_last(members, progress, finished)
                     raise
-                last_log_steps, last_log_time = progress.env_steps, now
+                last_log_steps, last_log_time, last_log_cpu = progress.env_steps, now, cpu
 
             if progress.crossed(steps_before, checkpoint_every) and not finished:
                 _save_last(members, progress)
@@ -225,12 +228,13 @@ def _save_last(members: Sequence[Member], progress: Progress, finished: bool = F
 
 
 def _log_interval(members: Sequence[Member], progress: Progress, total_steps: int, rate: float, validating: bool,
-                  lines: bool) -> None:
+                  lines: bool, cpu_rate: float | None = None) -> None:
     """A log point: each member's curves since the last one (and a greedy validation pass when one
-    is due) go to its log; with `lines` (no progress bar: output goes to a file) a line per member."""
+    is due) go to its log; with `lines` (no progress bar: output goes to a file) a line per member.
+    `rate`, `cpu_rate`: env steps per member per second of wall time and of the process's CPU time."""
     grouped = len(members) > 1
     for member in members:
-        metrics = member.interval_metrics(rate, progress.updates)
+        metrics = member.interval_metrics(rate, progress.updates, cpu_rate)
         if validating:
             metrics.update(member.validate(progress))
         with deferred():  # a signal during the store write waits for the loop's stop, after last.pt

@@ -233,8 +233,10 @@ class Member:
                 f"Try a lower learner.lr (now {L.lr}) or learner.max_grad_norm.")
 
     # --- log points --------------------------------------------------------------------------------
-    def interval_metrics(self, steps_per_s: float, updates_done: int) -> dict[str, float]:
-        """The member's `train/*` values since the last log point; the curves start afresh."""
+    def interval_metrics(self, steps_per_s: float, updates_done: int,
+                         cpu_steps_per_s: float | None = None) -> dict[str, float]:
+        """The member's `train/*` values since the last log point; the curves start afresh. `steps_per_s` and
+        `cpu_steps_per_s`: env steps per second of wall time and of the process's CPU time since then."""
         metrics = {f"train/{k}": float(np.mean(v)) for k, v in self.episodes.items() if v}
         if self.losses:
             metrics["train/loss"] = float(torch.stack(self.losses).mean())
@@ -242,6 +244,8 @@ class Member:
                         "train/steps_per_s": steps_per_s,
                         "train/episodes": float(len(self.episodes["avg_speed_kmh"])),
                         "train/updates": float(updates_done)})
+        if cpu_steps_per_s is not None:
+            metrics["train/cpu_steps_per_s"] = cpu_steps_per_s
         self.episodes = {k: [] for k in TRAINING_CURVE_METRICS}
         self.losses = []
         return metrics

@@ -13,7 +13,7 @@ from hydra import compose, initialize_config_dir
 from hgm_repro.app.job import run_job
 from hgm_repro.contracts.checkpoint import load_checkpoint
 from hgm_repro.contracts.conf_dir import CONF_DIR
-from hgm_repro.contracts.names import EPISODE_METRICS
+from hgm_repro.contracts.names import EPISODE_METRICS, TRAINING_RATES
 
 # Everything that could change the numbers is spelled out, not left to a default: float32, collect then
 # update (the overlapped loop draws its batches in another order and has tests of its own).
@@ -50,7 +50,8 @@ def fingerprint(launch: Path) -> dict[str, str]:
     train_run = client.get_run(outcome.training.run_id)
     curves = {key: [(m.step, m.value) for m in client.get_metric_history(outcome.training.run_id, key)]
               for key in sorted(train_run.data.metrics) if key.startswith(("train/", "val/"))}
-    curves = {k: v for k, v in curves.items() if k != "train/steps_per_s"}  # wall-clock, not the training
+    # The rates time the machine, not the training.
+    curves = {k: v for k, v in curves.items() if k.removeprefix("train/") not in TRAINING_RATES}
     return {
         "weights": _digest(b"".join(t.numpy().tobytes() for t in network.values())),
         "curves": _digest(json.dumps(curves, sort_keys=True).encode()),

@@ -12,6 +12,7 @@ import torch
 from hgm_repro.contracts import runtime_choice
 from hgm_repro.contracts.checkpoint import load_checkpoint
 from hgm_repro.contracts.errors import ConfigError
+from hgm_repro.contracts.names import TRAINING_RATES
 from hgm_repro.learner import train
 from tests.helpers.learner import Recorder, compose_job
 
@@ -25,7 +26,8 @@ def _digest(path: Path) -> str:
 
 
 def _values(log: Recorder) -> list[tuple[int, dict[str, float]]]:
-    return [(step, {k: v for k, v in metrics.items() if k != "train/steps_per_s"}) for step, metrics in log.calls]
+    return [(step, {k: v for k, v in metrics.items() if k.removeprefix("train/") not in TRAINING_RATES})
+            for step, metrics in log.calls]
 
 
 def _losses(log: Recorder) -> list[float]:

@@ -39,8 +39,9 @@ def test_training_logs_curves_only(trained):
     _, _, log = trained
     # Parameter counts are the job's params (tests/test_watch.py), not curves.
     assert not any(k.startswith("params/") for _, metrics in log.calls for k in metrics)
-    for key in ("train/loss", "train/epsilon", "train/beta", "train/steps_per_s", "train/avg_speed_kmh",
-                "train/lane_changes", "train/overtakes", "train/episode_return", "train/collisions"):
+    for key in ("train/loss", "train/epsilon", "train/beta", "train/steps_per_s", "train/cpu_steps_per_s",
+                "train/avg_speed_kmh", "train/lane_changes", "train/overtakes", "train/episode_return",
+                "train/collisions"):
         assert log.steps(key), f"{key} never logged"
     assert log.steps("train/epsilon") == [32, 64, 96, 128]
     epsilons = [m["train/epsilon"] for _, m in log.calls if "train/epsilon" in m]
