@@ -62,6 +62,16 @@ timer=$!
 status=0
 wait "$sweep" || status=$?
 kill "$timer" 2>/dev/null || true
+# The sweep's parent exits at once, but its joblib workers go on to write last.pt and mark their runs KILLED,
+# and then idle on, orphaned: keep nothing until the group has used no CPU for 15 s, then end what is left.
+used=-1
+while pgrep -g "$sweep" >/dev/null; do
+  now=$(ps -o times= -g "$sweep" | awk '{s += $1} END {print s + 0}')
+  [ "$now" = "$used" ] && break
+  used=$now
+  sleep 15
+done
+kill -KILL -- "-$sweep" 2>/dev/null || true
 echo "ladder.sh: the sweep ended with status $status after at most $minutes minutes (log: $STORE/$log)"
 
 # Keep: the database, artifacts under 2 MB but the networks (configs, episode tables, records), every training's

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import sqlite3
 import subprocess
 from pathlib import Path
 
@@ -46,6 +47,14 @@ def test_a_rung_stopped_by_its_time_resumes_on_a_new_machine_from_the_kept_state
     state = tmp_path / "state" / "paper_steps"
     kept = sorted(p.name for p in (state / "trainings").glob("*/*"))
     assert kept == ["last.pt", "mlflow_run_id"] and (state / "mlflow.db").is_file()
+    # What is kept is what the stopped job wrote last: its last.pt, and its run marked KILLED.
+    store = tmp_path / "runs" / "paper_steps"
+    (written,) = store.glob("checkpoints/*/last.pt")
+    assert (state / "trainings" / written.parent.name / "last.pt").read_bytes() == written.read_bytes()
+    with sqlite3.connect(state / "mlflow.db") as db:
+        statuses = db.execute("SELECT r.status FROM runs r JOIN tags t ON t.run_uuid = r.run_uuid "
+                              "WHERE t.key = 'stage' AND t.value = 'train'").fetchall()
+    assert statuses == [("KILLED",)]
     shutil.rmtree(tmp_path / "runs")  # a new machine: the store is gone
     second = run("ladder.sh", "paper_steps", "1", *tiny, env=env, timeout=240)
     assert second.returncode == 0 and "restored paper_steps" in second.stdout
