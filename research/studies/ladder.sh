@@ -17,7 +17,8 @@
 # two jobs at once (seed varies fastest, so the first jobs are the trainings). The rung is published
 # beside the quick grid with `python -m analysis --bundle docs/results research/studies/runs/ladder/RUNG/bundle
 # --write-bundle docs/results --out docs/results/report` after `python -m analysis --write-bundle bundle
-# --no-report` in the store.
+# --no-report` in the store; a rung under way is published the same way: its stopped trainings (stopped.csv)
+# give the report's scale ladder each one's steps and CPU-hours so far, and the hours left.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 rung=${1:-}
