@@ -55,8 +55,18 @@ sweep=$!
 # LADDER_NICE=19: the rung takes only what other work leaves idle. Its own session is its own scheduler
 # autogroup, where `nice` alone would not yield to other sessions: the group's nice is what counts.
 if [ -n "${LADDER_NICE:-}" ]; then
-  echo "$LADDER_NICE" >"/proc/$sweep/autogroup" 2>/dev/null ||
-    echo "ladder.sh: could not lower the sweep's priority (no /proc/$sweep/autogroup); it runs at full share" >&2
+  # setsid gives the sweep its own session, and so its own autogroup, only once it runs: until then the sweep
+  # is in this script's autogroup, and the write would lower the caller's priority instead of the sweep's.
+  for _ in $(seq 100); do
+    [ "$(ps -o sid= -p "$sweep" | tr -d ' ')" = "$sweep" ] && break
+    sleep 0.1
+  done
+  if [ "$(ps -o sid= -p "$sweep" | tr -d ' ')" != "$sweep" ]; then
+    echo "ladder.sh: the sweep has no session of its own yet; its priority is left as it is" >&2
+  else
+    echo "$LADDER_NICE" >"/proc/$sweep/autogroup" 2>/dev/null ||
+      echo "ladder.sh: could not lower the sweep's priority (no /proc/$sweep/autogroup); it runs at full share" >&2
+  fi
 fi
 (sleep $((minutes * 60)) && kill -TERM -- "-$sweep" 2>/dev/null) &
 timer=$!

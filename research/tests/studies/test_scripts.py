@@ -38,12 +38,15 @@ def test_the_retest_names_the_models_it_knows():
 
 @pytest.mark.slow
 def test_a_rung_stopped_by_its_time_resumes_on_a_new_machine_from_the_kept_state(tmp_path):
-    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state"), "LADDER_NICE": "1"}
+    ours = Path("/proc/self/autogroup").read_text() if Path("/proc/self/autogroup").exists() else None
     tiny = ("learner.total_steps=40000", "learner.warmup_steps=100", "eval.test_steps=64", "eval.test_envs=4",
             "seed=0", "scenario='3'", "logging.checkpoint_every=200", "tracking.log_gif=false")
     first = run("ladder.sh", "paper_steps", "1", *tiny, env=env, timeout=240)
     assert first.returncode == 0, first.stderr
     assert "ended with status 143" in first.stdout  # stopped by its time, not finished
+    if ours is not None:  # the sweep's priority was lowered (a little: it must still train), not the caller's
+        assert Path("/proc/self/autogroup").read_text() == ours
     state = tmp_path / "state" / "paper_steps"
     kept = sorted(p.name for p in (state / "trainings").glob("*/*"))
     assert kept == ["last.pt", "mlflow_run_id"] and (state / "mlflow.db").is_file()
