@@ -100,7 +100,9 @@ def host_sentences(table: pd.DataFrame, episodes: pd.DataFrame) -> list[str]:
     share of lane-change crashes (a seed that never changes lanes crashes otherwise)."""
     shares = seed_shares(episodes)
     out = []
-    for _, r in pooled(table[table["crashes"] > 0]).iterrows():
+    # Every scenario of a host that crashed, its crash-free ones too: they are episodes of its rate.
+    crashed = table[table["model"].isin(set(table.loc[table["crashes"] > 0, "model"]))]
+    for _, r in pooled(crashed).iterrows():
         kinds = ", ".join(f"{int(r[k])} {KIND_WORDS[k]} ({r[k] / r['crashes']:.0%})"
                           for k in CRASH_KINDS if r[k])
         text = (f"{model_label(r['model'], short=True)}: {int(r['crashes'])} crashes in {int(r['episodes'])} test "
@@ -123,7 +125,8 @@ def figure(table: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
     scenarios = ordered_scenarios(crashed["scenario"])
     fig, axes = plt.subplots(1, 1 + len(scenarios), figsize=(3.2 + 2.2 * len(scenarios), 3.6), sharey=True,
                              gridspec_kw={"width_ratios": [1.5] + [1] * len(scenarios)})
-    panels = [("all scenarios", pooled(crashed))] + [(f"scenario {s}", crashed[crashed["scenario"] == s])
+    hosts = table[table["model"].isin(set(crashed["model"]))]  # their crash-free scenarios count in the pool
+    panels = [("all scenarios", pooled(hosts))] + [(f"scenario {s}", crashed[crashed["scenario"] == s])
                                                      for s in scenarios]
     for ax, (title, part) in zip(axes, panels, strict=True):
         models = ordered_models(part["model"])

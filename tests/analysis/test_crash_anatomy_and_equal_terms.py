@@ -167,3 +167,11 @@ def test_each_crashed_host_gets_its_kinds_pooled_and_the_spread_over_its_seeds()
                     "to 25% (seed 0) of its crashes."]
     shares = crashes.seed_shares(frame).set_index(["model", "seed"])
     assert shares.loc[("proposed", 1), "rear_end_share"] == 1.0 and shares.loc[("proposed", 0), "crashes"] == 4
+
+
+def test_a_hosts_crash_free_scenarios_count_in_its_pooled_rate():
+    frame = hand_built()
+    # Two more episodes of the proposed host in scenario 5, neither of which crashed.
+    frame = pd.concat([frame, pd.DataFrame([episode("proposed", "5", 0, i) for i in (0, 1)])], ignore_index=True)
+    (said,) = crashes.host_sentences(crashes.anatomy(frame), frame)
+    assert said.startswith("Proposed: 4 crashes in 7 test episodes (0.571 per episode)")
