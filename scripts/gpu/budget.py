@@ -101,9 +101,11 @@ def read_bench(path: Path) -> list[dict[str, Any]]:
     return rows
 
 
-def rate_line(rows: list[dict[str, Any]]) -> dict[str, Any] | None:
-    """The last rate line (a grouped training's loop rate per member and fixed cost)."""
-    lines = [r for r in rows if r.get("member_env_steps_per_s")]
+def rate_line(rows: list[dict[str, Any]], preset: str | None = None) -> dict[str, Any] | None:
+    """The last rate line (a grouped training's loop rate per member and fixed cost) of `preset`: the
+    bench measures other presets' rates too. A line that names no preset counts for any."""
+    lines = [r for r in rows if r.get("member_env_steps_per_s")
+             and (preset is None or r.get("preset", preset) == preset)]
     return lines[-1] if lines else None
 
 
@@ -152,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
 
     rows = read_bench(args.bench)
-    rate = rate_line(rows)
+    rate = rate_line(rows, args.preset)
     factor, factor_note = learned_cell_factor(rows)
     if args.reference_seconds is not None and args.reference_cells > 0:
         reference_cell_s = args.reference_seconds / args.reference_cells

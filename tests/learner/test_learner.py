@@ -127,7 +127,8 @@ def test_cuda_graph_is_ignored_with_a_warning_on_cpu():
 
 @pytest.mark.cuda
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
-@pytest.mark.parametrize("options", [[], ["runtime.cuda_graph=true"], ["runtime.compile=true"]])
+@pytest.mark.parametrize("options", [[], ["runtime.cuda_graph=true"], ["runtime.compile=true"]],
+                         ids=["eager", "cuda_graph", "compile"])
 def test_smoke_training_on_cuda(tmp_path, options):
     cfg = compose_job("device=cuda", *options)
     state = load_checkpoint(train(cfg, tmp_path, Recorder()), cfg)

@@ -133,6 +133,13 @@ def test_budget_reads_its_rate_and_cell_factor_from_the_bench_lines(budget, tmp_
     assert budget.learned_cell_factor(rows)[0] == pytest.approx(3.0)
     assert budget.learned_cell_factor(rows[:1])[0] == budget.LEARNED_CELL_FACTOR
     assert budget.rate_line(rows[:3]) is None
+    # The bench measures other presets' rates after the grid's: the budget reads its own preset's line.
+    other = {"what": "learner training, members (paper_steps preset, end to end)", "preset": "paper_steps",
+             "member_env_steps_per_s": 2000.0, "fixed_s": 3.0}
+    rows = [*rows[:3], {**lines[3], "preset": "paper"}, other]
+    assert budget.rate_line(rows, "paper")["member_env_steps_per_s"] == 812.5
+    assert budget.rate_line(rows, "paper_steps")["member_env_steps_per_s"] == 2000.0
+    assert budget.rate_line(rows, "quick") is None and budget.rate_line(rows)["preset"] == "paper_steps"
 
 
 def test_budget_cli_prints_the_overrides_and_logs_its_inputs(budget, tmp_path, capsys):
@@ -153,6 +160,7 @@ def test_budget_cli_prints_the_overrides_and_logs_its_inputs(budget, tmp_path, c
 FAKE_PYTHON = r"""#!/bin/bash
 echo "$*" >> "$CALLS"
 case "$*" in
+  *"smoke_training_on_cuda[cuda_graph]"*) if [ -n "$FAIL_GRAPH" ]; then exit 1; fi ;;
   *budget.py*) echo "learner.total_steps=4096 learner.eps_steps=4096" ;;
   *hgm_repro.bench*) echo '{"what": "simulator", "n_envs": 8192, "env_steps_per_s": 1.0}' ;;
   *"-m hgm_repro -m"*) echo "job end: model=... (1.0 s)"; echo "job end: model=... (1.0 s)"
@@ -183,18 +191,22 @@ def _index(calls: list[str], *needles: str) -> int:
 def test_all_runs_every_step_in_one_call_and_hands_the_budget_to_the_grid(tmp_path):
     result, calls = _fake_all(tmp_path, "all", "--", "simulator.episode_seconds=5", DEVICE="cuda")
     assert result.returncode == 0, result.stderr + result.stdout
-    order = [_index(calls, "- cuda"), _index(calls, "-m pytest", "cpu_and_cuda_agree"),
+    order = [_index(calls, "- cuda"), _index(calls, "-m pytest", "cpu_and_cuda_agree", "smoke_training_on_cuda[eager]"),
+             _index(calls, "-m pytest", "smoke_training_on_cuda[cuda_graph]"),
              _index(calls, "-m hgm_repro.bench", "--device cuda", "--only rate", "--rate-members 5",
-                    "--update-members 15", "--preset smoke", "--obs-n-envs 8192,32768"),
+                    "--update-members 15", "--preset smoke", "--obs-n-envs 8192,32768",
+                    "--rate-overrides runtime.cuda_graph=true", "--update-modes eager,bf16,cuda_graph"),
+             _index(calls, "-m hgm_repro.bench", "--only rate", "--preset paper_steps"),
+             _index(calls, "-m hgm_repro.bench", "--only rate", "--preset paper_pixels"),
              _index(calls, "-m hgm_repro -m", "model=human,idm_mobil,idm_mobil_limits"),
              _index(calls, "budget.py", "--groups 3", "--test-cells 75", "--reference-cells 2"),
              _index(calls, "-m hgm_repro -m", "model=proposed,min,coordinate", "runtime.grouped=true",
-                    "learner.total_steps=4096 learner.eps_steps=4096"),
+                    "runtime.cuda_graph=true", "learner.total_steps=4096 learner.eps_steps=4096"),
              _index(calls, "-m analysis", "--write-bundle")]
     assert order == sorted(order)
     sweeps = [c for c in calls if "-m hgm_repro -m" in c]
     assert len(sweeps) == 2
-    assert all("scenario=1,2,3,4,5" in c and "seed=0,1,2,3,4" in c and "eval.test_envs=1024" in c
+    assert all("scenario=1,2,3,4,5" in c and "seed=0,1,2,3,4" in c and "eval.test_envs=256" in c
                and "hydra.launcher.n_jobs=8" in c and c.endswith("simulator.episode_seconds=5") for c in sweeps)
     out = tmp_path / "out"
     files = sorted(p.name for p in out.iterdir())
@@ -205,10 +217,21 @@ def test_all_runs_every_step_in_one_call_and_hands_the_budget_to_the_grid(tmp_pa
     assert '"what": "simulator"' in (out / "bench.jsonl").read_text()
 
 
+def test_a_failing_cuda_graph_leaves_the_bench_and_the_grid_eager(tmp_path):
+    result, calls = _fake_all(tmp_path, "all", DEVICE="cuda", FAIL_GRAPH="1")
+    assert result.returncode == 1  # the failure is reported, and the call goes on
+    assert "CUDA_GRAPH=false" in result.stdout + result.stderr
+    runs = [c for c in calls if "-m hgm_repro.bench" in c or "model=proposed,min,coordinate" in c]
+    assert len(runs) == 4 and all("runtime.cuda_graph=false" in c for c in runs)
+    assert (tmp_path / "out" / "results.tgz").exists()
+
+
 def test_the_cpu_rehearsal_runs_the_same_steps_on_a_smaller_grid(tmp_path):
     result, calls = _fake_all(tmp_path, "all")
     assert result.returncode == 0, result.stderr + result.stdout
     assert not any("-m pytest" in c for c in calls)  # the CUDA-vs-CPU test needs CUDA
+    benches = [c for c in calls if "-m hgm_repro.bench" in c]
+    assert len(benches) == 1 and "runtime.cuda_graph=false" in benches[0] and "--update-modes eager" in benches[0]
     assert _index(calls, "budget.py", "--device cpu", "--test-cells 12")
     sweeps = [c for c in calls if "-m hgm_repro -m" in c]
     assert len(sweeps) == 2 and all("seed=0,1 " in c and "scenario=1,2 " in c and "eval.test_envs=4" in c
