@@ -24,7 +24,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis.load import StoreData, _seed_value
-from hgm_repro.contracts.names import REPORTED_METRICS, RUN_TAGS
+from hgm_repro.contracts.names import REPORTED_METRICS, RUN_TAGS, SAFEST_TAGS
 
 # Bump when a file, a column's meaning or the manifest changes shape; older bundles then fail
 # loudly instead of building a wrong report.
@@ -41,7 +41,8 @@ TABLE_FILES: dict[str, tuple[str, str]] = {
                                  "the eval metrics of each episode"),
     "curves": ("curves.csv", "training curves, long: run_id, model, seed, train_key, metric, step, value"),
     "runs": ("runs.csv", "one row per kept train/eval run: run_id, run_name, status, start_time, "
-                         f"parent_run_id, the tags ({', '.join(RUN_TAGS)}), params.<key> (the resolved "
+                         f"parent_run_id, the tags ({', '.join(RUN_TAGS)}; on a training run also "
+                         f"{', '.join(SAFEST_TAGS)}: what its safest choice found), params.<key> (the resolved "
                          "config) and metrics.<key> (last values)"),
     "stopped": ("stopped.csv", "trainings a signal stopped before their last step, to be resumed: run_id, model, "
                                "seed, experiment, train_key, step (the last env step logged), total_steps, steps_per_s "

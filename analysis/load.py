@@ -20,7 +20,7 @@ from mlflow.entities import ViewType
 from analysis.costs import hours_trained, last_rate
 from hgm_repro.contracts.names import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
 from hgm_repro.contracts.names import RUN_TAGS as TAG_COLUMNS
-from hgm_repro.contracts.names import current_key
+from hgm_repro.contracts.names import SAFEST_TAGS, current_key
 
 # The experiment preset a run was made with (`quick`, `paper_steps`, ...): its resolved `experiment.name`,
 # else the `preset` tag every run of the app carries, else this.
@@ -149,7 +149,7 @@ def _runs_frame(client: MlflowClient, experiment_id: str) -> pd.DataFrame:
                 "start_time": run.info.start_time or 0,
                 "parent_run_id": tags.get("mlflow.parentRunId"),
             }
-            for tag in (*TAG_COLUMNS, PRESET_TAG, RESUMES_TAG):
+            for tag in (*TAG_COLUMNS, PRESET_TAG, RESUMES_TAG, *SAFEST_TAGS):
                 row[tag] = tags.get(tag)
             row.update({f"params.{current_key(k)}": v for k, v in run.data.params.items()})  # old names too
             row.update({f"metrics.{k}": v for k, v in run.data.metrics.items()})

@@ -175,11 +175,18 @@ def evaluate_and_log(
         return done.info.run_id, {k: v for k, v in done.data.metrics.items() if k.startswith("eval/")}
     safest_record = None
     if job.eval.checkpoint == "safest" and checkpoint is not None:
-        from ..evaluation.safest import choose_safest
+        from ..evaluation.safest import SafestRefused, choose_safest, outcome_tags
 
         # Chosen before the run opens: a training with no pass under the bar is refused with its message
-        # and leaves no failed run in the store.
-        checkpoint, safest_record = choose_safest(job, checkpoint.parent)
+        # and leaves no failed run in the store; the training run records the outcome either way.
+        try:
+            checkpoint, safest_record = choose_safest(job, checkpoint.parent)
+        except SafestRefused as refused:
+            if training.run_id:
+                tracker.set_tags(training.run_id, outcome_tags(refused.record))
+            raise
+        if training.run_id:
+            tracker.set_tags(training.run_id, outcome_tags(safest_record))
     eval_tags = {**run_tags(job, train_key(job)), "stage": "eval", "scenario": job.scenario.name,
                  "training": training.how, "evaluation_version": EVALUATION_VERSION, "evaluation_key": key}
     if training.run_id:

@@ -27,6 +27,13 @@ TRAINING_RATES = ("steps_per_s", "cpu_steps_per_s")
 # Tags every job run carries (architecture.md); analysis filters on them.
 RUN_TAGS = ("stage", "model", "scenario", "seed", "train_key", "git_commit", "git_dirty")
 
+# Tags the safest choice (eval.checkpoint=safest) leaves on the TRAINING run, chosen or refused: a refused
+# choice opens no test run, so only the training run can say that its passes were driven and none was safe.
+# Values: the env steps of the chosen pass, or "refused"; the bar (collisions per episode); the fewest
+# collisions per episode any pass had on the validation drives.
+SAFEST_TAGS = ("safest_choice", "safest_bar", "safest_lowest_collisions")
+SAFEST_REFUSED = "refused"
+
 # The validation return a training run logs (greedy episodes in the training traffic, on seeds
 # no test uses): what a hyperparameter search may optimise, unlike any `eval/` value.
 VALIDATION_RETURN = "val/episode_return"

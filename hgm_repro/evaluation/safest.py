@@ -10,7 +10,8 @@ records no collisions, so every pass is driven again. Among the passes with fewe
 episode than `eval.safest_max_collisions`, the best mean return wins and is kept as `safest.pt`, with
 a record of every pass (`safest.json`). The drives are made once per training and options; another
 bar re-picks from them. When no pass is under the bar, or no pass was kept, the test is refused with
-a message.
+a message. Either outcome can be written on the training run (`outcome_tags`), so that a store says which
+trainings were refused, not only which were tested.
 """
 
 from __future__ import annotations
@@ -26,7 +27,7 @@ from filelock import FileLock
 from ..contracts.checkpoint import SAFEST_CHECKPOINT, SAFEST_RECORD, VAL_CHECKPOINTS, load_checkpoint, save_checkpoint
 from ..contracts.errors import ConfigError
 from ..contracts.interrupts import acquire_stoppably
-from ..contracts.names import VAL_SEED_OFFSET
+from ..contracts.names import SAFEST_REFUSED, SAFEST_TAGS, VAL_SEED_OFFSET
 from ..contracts.schema import JobConfig
 from ..envs import make_env
 from .episodes import learned_policy, run_episodes
@@ -38,6 +39,23 @@ def drive_options(job: JobConfig) -> dict[str, Any]:
     envs = job.eval.safest_envs
     return {"envs": envs, "episodes_per_env": math.ceil(job.eval.safest_episodes / envs),
             "traffic": job.train_scenario.name, "traffic_seed": job.seed + VAL_SEED_OFFSET}
+
+
+class SafestRefused(ConfigError):
+    """No kept pass stays under the bar: the test is refused. `record` holds every pass's drive."""
+
+    def __init__(self, message: str, record: dict[str, Any]):
+        super().__init__(message)
+        self.record = record
+
+
+def outcome_tags(record: dict[str, Any]) -> dict[str, str]:
+    """The training run's tags (SAFEST_TAGS) for a safest record: the chosen pass's env steps or "refused",
+    the bar, and the fewest collisions per episode any pass had."""
+    chosen = record.get("chosen_env_steps")
+    lowest = min(r["collisions"] for r in record["candidates"])
+    values = (SAFEST_REFUSED if chosen is None else str(chosen), str(record["max_collisions"]), f"{lowest:.4f}")
+    return dict(zip(SAFEST_TAGS, values, strict=True))
 
 
 def pick_safest(rows: list[dict[str, Any]], max_collisions: float) -> dict[str, Any] | None:
@@ -71,11 +89,11 @@ def choose_safest(job: JobConfig, checkpoint_dir: Path) -> tuple[Path, dict[str,
         write_json(record, record_path)
         if chosen is None:
             lowest = min(record["candidates"], key=lambda r: r["collisions"])
-            raise ConfigError(
+            raise SafestRefused(
                 f"eval.checkpoint=safest: no validation pass of {checkpoint_dir} stays under "
                 f"eval.safest_max_collisions={bar} collisions per episode on {lowest['episodes']} validation episodes "
                 f"(the safest, at {lowest['env_steps']} env steps, had {lowest['collisions']:.3f}; every pass in "
-                f"{record_path}). Raise the bar, or test eval.checkpoint=best.")
+                f"{record_path}). Raise the bar, or test eval.checkpoint=best.", record)
         winner = next(p for p in passes if p.env_steps == chosen["env_steps"])
         chosen_path = checkpoint_dir / SAFEST_CHECKPOINT
         save_checkpoint({**load_checkpoint(winner.path), "safest_from": winner.env_steps}, chosen_path)

@@ -60,3 +60,31 @@ def test_the_first_table_lists_hosts_and_leaves_the_probes_to_their_sections():
 
     text = "\n".join(headline_lines(evals(), ["1", "3"]))
     assert "| Proposed |" in text and "| Human |" in text and "safest" not in text
+
+
+def test_refused_trainings_are_read_from_the_training_runs_and_named_even_when_a_host_has_no_safest_test():
+    tested = pd.concat([evals(), pd.DataFrame(rows("coordinate", {0: 200, 1: 190}, {0: 0.5, 1: 0.6}))])
+    tested["train_key"] = tested["model"].str.replace("_safest", "") + tested["seed"].astype(str)
+    runs = pd.DataFrame({
+        "stage": ["train"] * 5 + ["eval"],
+        "model": ["proposed", "proposed", "coordinate", "coordinate", "coordinate", "coordinate"],
+        "seed": [2, 0, 0, 1, 7, 0],
+        "train_key": ["proposed2", "proposed0", "coordinate0", "coordinate1", "coordinate7", "coordinate0"],
+        "safest_choice": ["refused", "20000", "refused", "refused", "refused", None],
+        "safest_bar": ["0.05"] * 5 + [None],
+        "safest_lowest_collisions": ["0.1170", "0.0100", "0.0600", "0.5000", "0.9000", None],
+    })
+    refused = safest.refusals(tested, runs)
+    # proposed seed 0 was chosen; coordinate seed 7 is no training the tests used (another preset, say).
+    assert refused[["host", "seed"]].values.tolist() == [["proposed", 2], ["coordinate", 0], ["coordinate", 1]]
+    said = safest.sentences(tested, refused)
+    assert said[0].startswith("Proposed: the safest network minus best.pt")
+    assert "seed 2 was refused: no kept pass stayed under 0.05 collisions per episode" in said[0]
+    assert "0.117 times per episode" in said[0] and "no safest test yet" not in said[0]
+    assert said[1].startswith("Coordinate: no safest test; seeds 0, 1 were refused")
+    assert "0.060-0.500 times per episode" in said[1]
+    # A host whose every training was refused still gets the section; without runs nothing is refused.
+    alone = tested[tested["model"] != "proposed_safest"]
+    section = safest.section(alone, runs)
+    assert section is not None and any("Coordinate: no safest test" in getattr(b, "text", "") for b in section.blocks)
+    assert safest.section(alone) is None and safest.refusals(tested, None).empty

@@ -110,3 +110,25 @@ def test_a_job_tests_the_safest_pass_and_the_probe_reuses_the_training_under_its
     with pytest.raises(ConfigError, match="no validation pass .* stays under eval.safest_max_collisions=0"):
         run_job(compose_cfg(*job_keep, "eval.safest_max_collisions=0"), tmp_path)
     assert len(tracker.client.search_runs([tested.info.experiment_id], "tags.stage = 'eval'")) == evals_before
+    # The training run says what the safest choice found, the latest bar's outcome: chosen, then refused.
+    train_tags = tracker.get_run(outcome.training.run_id).data.tags
+    lowest = min(r["collisions"] for r in record["candidates"])
+    assert (train_tags["safest_choice"], train_tags["safest_bar"]) == ("refused", "0.0")
+    assert float(train_tags["safest_lowest_collisions"]) == pytest.approx(lowest, abs=1e-4)
+    # The report reads the refusal from the store: the training is named though no test run exists for it.
+    from analysis import safest as section
+    from analysis.load import load_store
+
+    data = load_store(tracker_uri := resolve_location(compose_cfg(*job_keep).tracking, tmp_path).tracking_uri)
+    assert tracker_uri.startswith("sqlite:///")
+    refused = section.refusals(data.evals, data.runs)
+    assert refused[["host", "seed"]].values.tolist() == [["proposed", 0]]
+    assert refused["bar"].tolist() == [0.0]
+
+
+def test_the_training_run_is_tagged_with_what_the_choice_found():
+    record = {"candidates": [{"collisions": 0.25}, {"collisions": 0.0625}], "max_collisions": 0.05,
+              "chosen_env_steps": None}
+    assert safest.outcome_tags(record) == {"safest_choice": "refused", "safest_bar": "0.05",
+                                           "safest_lowest_collisions": "0.0625"}
+    assert safest.outcome_tags({**record, "chosen_env_steps": 20000})["safest_choice"] == "20000"
