@@ -77,7 +77,7 @@ def refusals(evals: pd.DataFrame, runs: pd.DataFrame | None) -> pd.DataFrame:
 def _hosts(evals: pd.DataFrame, refused: pd.DataFrame) -> list[str]:
     """The hosts with safest tests or refusals, in the report's order."""
     tested = {SAFEST[m] for m in evals["model"].unique() if m in SAFEST}
-    return [h for h in ordered_models(tested | set(refused["host"]))]
+    return list(ordered_models(tested | set(refused["host"])))
 
 
 def table(evals: pd.DataFrame, scenario: str = HEADLINE_SCENARIO) -> list[list[str]]:
