@@ -16,7 +16,8 @@
 #      training with no pass under the bar is refused with a message and has no such test.
 # All models' plain tests come first (the crash anatomy of every host), then the probes. Resumable: run
 # it again and finished trainings and tests are reused. The store is research/studies/runs/results/ (not
-# committed); at the end its bundle replaces each (model, preset)'s rows in docs/results/ and the report
+# committed); at the end its bundle, cut to the models and safest seeds whose cells are whole
+# (research/studies/whole_cells.py), replaces each (model, preset)'s rows in docs/results/ and the report
 # is rebuilt.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
@@ -56,6 +57,8 @@ for model in "${models[@]}"; do
   safest_seed "$model" 2 "$@" & safest_seed "$model" 3 "$@"; wait
   safest_seed "$model" 4 "$@"
 done
-python -m analysis --write-bundle bundle --no-report
+# Published from a copy cut to what is whole: a model stopped part-way keeps its published rows.
+python "$ROOT/research/studies/whole_cells.py" mlflow.db whole/mlflow.db
+python -m analysis --tracking-uri "sqlite:///$PWD/whole/mlflow.db" --write-bundle bundle --no-report
 cd "$ROOT"
 python -m analysis --bundle docs/results "$RUNS/bundle" --write-bundle docs/results --out docs/results/report
