@@ -2,21 +2,16 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
 
 import pandas as pd
 import pytest
 
-from tests.helpers import REPO_ROOT
+from research.tests.studies import load_study
 
 
 def _module():
-    script = REPO_ROOT / "research" / "studies" / "crash_anatomy.py"
-    spec = importlib.util.spec_from_file_location("crash_anatomy", script)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_study("crash_anatomy")
 
 
 def _plateau_folder(root, seed, crashes):

@@ -2,19 +2,13 @@
 
 from __future__ import annotations
 
-import importlib.util
-
 import pytest
 
-from tests.helpers import REPO_ROOT
+from research.tests.studies import load_study
 
 
 def _module():
-    script = REPO_ROOT / "research" / "studies" / "whole_cells.py"
-    spec = importlib.util.spec_from_file_location("whole_cells", script)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_study("whole_cells")
 
 
 @pytest.fixture(scope="module")
