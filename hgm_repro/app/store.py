@@ -29,7 +29,7 @@ from filelock import FileLock, Timeout
 from omegaconf import DictConfig
 
 from ..contracts.config_tree import flatten as flatten_tree
-from ..contracts.interrupts import acquire_stoppably, protected
+from ..contracts.interrupts import acquire_stoppably, deferred, protected
 from .descriptions import EXPERIMENT_DESCRIPTION
 from .provenance import source_tags
 
@@ -255,9 +255,12 @@ class Tracker:
             tags[NOTE] = description
         if parent_run_id:
             tags["mlflow.parentRunId"] = parent_run_id
-        run = self._write(self.client.create_run, self.experiment_id, tags=tags, run_name=name)
-        # Until the lock is held, the pid tag says the run is alive (see `close_orphans`).
-        self._hold(run.info.run_id)
+        # A stop signal waits for the caller's next safe point: raised here, it would leave a RUNNING
+        # run whose id nobody has, to close it KILLED.
+        with deferred():
+            run = self._write(self.client.create_run, self.experiment_id, tags=tags, run_name=name)
+            # Until the lock is held, the pid tag says the run is alive (see `close_orphans`).
+            self._hold(run.info.run_id)
         return run.info.run_id
 
     def reopen(self, run_id: str) -> None:
@@ -265,10 +268,12 @@ class Tracker:
 
         The run's lock is taken first: a job closing orphans at the same moment either closes
         the old attempt before this one reopens it, or finds the lock held and leaves it alone.
+        A stop signal waits for the caller's next safe point, as in `start_run`.
         """
-        self._hold(run_id)
-        self._write(self.client.update_run, run_id, status="RUNNING")
-        self.set_tags(run_id, {"host": socket.gethostname(), "pid": str(os.getpid())})
+        with deferred():
+            self._hold(run_id)
+            self._write(self.client.update_run, run_id, status="RUNNING")
+            self.set_tags(run_id, {"host": socket.gethostname(), "pid": str(os.getpid())})
 
     def end(self, run_id: str, status: str = "FINISHED") -> None:
         self._write(self.client.set_terminated, run_id, status=status)

@@ -233,10 +233,8 @@ def _train(seeds: list[_Seed], tracker: Tracker, parent_run_id: str | None,
     with ExitStack() as running:
         runs = []
         for seed in seeds:
-            run_id, how, log_to_run = _open_run(seed, tracker, {**run_tags(seed.job, seed.key), **grouped},
-                                                parent_run_id)
-            running.enter_context(run_status(tracker, run_id))
-            runs.append((run_id, how, log_to_run))
+            runs.append(_open_run(seed, tracker, {**run_tags(seed.job, seed.key), **grouped}, parent_run_id,
+                                  running))
         first = seeds[0].job
         with tracker.system_metrics(runs[0][0], first.tracking.system_metrics):
             if len(seeds) == 1:
@@ -257,9 +255,11 @@ def _train(seeds: list[_Seed], tracker: Tracker, parent_run_id: str | None,
     return trained
 
 
-def _open_run(seed: _Seed, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None) -> tuple[str, str, LogFn]:
-    """Start (or reopen, to resume) the seed's training run; returns its id, how it trains, and the
-    `log` callable the learner writes `train/*` curves through."""
+def _open_run(seed: _Seed, tracker: Tracker, tags: dict[str, Any], parent_run_id: str | None,
+              running: ExitStack) -> tuple[str, str, LogFn]:
+    """Start (or reopen, to resume) the seed's training run, ended by `running` (`run_status`) from the
+    moment it is open; returns its id, how it trains, and the `log` callable the learner writes
+    `train/*` curves through."""
     from ..models.builders import make_network
     from ..models.networks import param_counts
 
@@ -268,6 +268,7 @@ def _open_run(seed: _Seed, tracker: Tracker, tags: dict[str, Any], parent_run_id
     if seed.unfinished is not None:
         run_id, how = seed.unfinished, "resumed"
         tracker.reopen(run_id)
+        running.enter_context(run_status(tracker, run_id))
         resumes = int(tracker.get_run(run_id).data.tags.get("resumes", "0")) + 1
         tracker.set_tags(run_id, {"resumes": resumes, "device": job.device})
         # The killed attempt may have logged steps beyond its last checkpoint: keep those and log
@@ -279,6 +280,7 @@ def _open_run(seed: _Seed, tracker: Tracker, tags: dict[str, Any], parent_run_id
         run_id = tracker.start_run(f"{job.model.name} seed{job.seed} training {seed.key}",
                                    {**tags, "stage": "train", "scenario": job.train_scenario.name}, parent_run_id,
                                    description=training_description(job, seed.key, checkpoint_dir))
+        running.enter_context(run_status(tracker, run_id))
         _write_atomically(checkpoint_dir / RUN_ID_FILE, run_id)
     # Again on a resume: the killed attempt may have stopped before logging them (same values, allowed).
     tracker.log_params(run_id, {**flatten(training_config(job)),

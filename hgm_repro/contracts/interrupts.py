@@ -62,13 +62,21 @@ def raise_if_pending() -> None:
 
 def acquire_stoppably(lock: Any, slice_s: float) -> None:
     """Acquire a `filelock` lock, waiting in slices of `slice_s` so that a stop signal that arrives
-    while another process holds it still stops the job."""
+    while another process holds it still stops the job.
+
+    A signal that arrived during the wait is raised even when the lock came free: the holder is
+    often stopped by the same signal (a sweep's process group), and a waiter that went on would
+    start the work the holder just gave up (reopen its training run, and leave it RUNNING)."""
     while True:
         try:
             lock.acquire(timeout=slice_s)
-            return
         except Timeout:
             raise_if_pending()
+            continue
+        if pending():
+            lock.release()
+            raise_if_pending()
+        return
 
 
 @contextmanager

@@ -12,6 +12,7 @@
 #   bash research/studies/ladder.sh RUNG MINUTES [Hydra overrides]
 #   bash research/studies/ladder.sh paper_pixels 150 model=proposed seed=0,1   # the proposed host's seeds first
 #   LADDER_NICE=19 bash research/studies/ladder.sh paper_pixels 150 seed=0      # only on cores left idle
+#   bash research/studies/ladder.sh paper_steps keep   # only keep the store's state (a sweep stopped otherwise)
 #
 # Without overrides the sweep is the rung's whole row for the proposed host: scenarios 1-5 x seeds 0-4,
 # two jobs at once (seed varies fastest, so the first jobs are the trainings). The rung is published
@@ -27,8 +28,8 @@ case "$rung" in
   paper_steps | paper_pixels) ;;
   *) echo "ladder.sh: rung '${rung}' is not one of: paper_steps paper_pixels" >&2; exit 2 ;;
 esac
-if ! [[ "$minutes" =~ ^[0-9]+$ ]] || [ "$minutes" -lt 1 ]; then
-  echo "ladder.sh: MINUTES '${minutes}' must be a whole number of minutes, at least 1" >&2
+if [ "$minutes" != keep ] && { ! [[ "$minutes" =~ ^[0-9]+$ ]] || [ "$minutes" -lt 1 ]; }; then
+  echo "ladder.sh: MINUTES '${minutes}' must be a whole number of minutes, at least 1 (or 'keep')" >&2
   exit 2
 fi
 shift 2
@@ -46,7 +47,49 @@ if [ -d "$STATE" ] && [ ! -f "$STORE/mlflow.db" ]; then
   echo "ladder.sh: restored $rung from $STATE"
 fi
 
+# Keep: first close as KILLED every run the stopped jobs left RUNNING (a job killed before it could close its
+# runs, the sweep's own run), as the next launch would; then the database, artifacts under 2 MB but the networks
+# (configs, episode tables, records), every training's checkpoints (the replay memory is not in them).
+keep() {
+  python - "$STORE" <<'PY'
+import sys
+from pathlib import Path
+
+from hgm_repro.app.store import Tracker, resolve_location
+
+for run_id in Tracker(resolve_location({}, Path(sys.argv[1])), "hgm_repro").close_orphans():
+    print(f"ladder.sh: run {run_id} was left RUNNING by a stopped job: marked KILLED")
+PY
+  rm -rf "$STATE.new"
+  mkdir -p "$STATE.new/artifacts" "$STATE.new/trainings"
+  sqlite3 mlflow.db ".backup '$STATE.new/mlflow.db'" 2>/dev/null || cp mlflow.db "$STATE.new/mlflow.db"
+  # find and cp, not rsync: a fresh machine may not have it.
+  if [ -d mlartifacts ]; then
+    (cd mlartifacts && find . -type f -size -2049k ! -name '*.pt' ! -name '*.pth' ! -name '*.gif' \
+      -exec cp -p --parents {} "$STATE.new/artifacts/" \;)
+  fi
+  if [ -d checkpoints ]; then
+    (cd checkpoints && find . -type f \( -name '*.pt' -o -name mlflow_run_id -o -name '*.json' \) \
+      -exec cp -p --parents {} "$STATE.new/trainings/" \;)
+  fi
+  rm -rf "$STATE"
+  mv "$STATE.new" "$STATE"
+  size_mb=$(du -sm "$STATE" | cut -f1)
+  if [ "$size_mb" -gt "${LADDER_MAX_MB:-50}" ]; then
+    # A paper-sized network's last.pt (weights, target, Adam's moments) is over 100 MB: too large for git.
+    echo "ladder.sh: $STATE holds ${size_mb} MB, more than LADDER_MAX_MB=${LADDER_MAX_MB:-50}: too large to commit;" \
+      "carry it another way (or train this rung where it fits one session)" >&2
+  else
+    echo "ladder.sh: commit $STATE (${size_mb} MB) to carry the rung to the next session"
+  fi
+}
+
 cd "$STORE"
+if [ "$minutes" = keep ]; then
+  [ -f mlflow.db ] || { echo "ladder.sh: no store at $STORE to keep" >&2; exit 2; }
+  keep
+  exit 0
+fi
 log="sweep-$(date -u +%Y%m%dT%H%M%S).log"
 # Its own process group, so that the stop reaches the joblib workers too.
 setsid python -m hgm_repro -m "experiment=$rung" "scenario='1','2','3','4','5'" model=proposed seed=0,1,2,3,4 \
@@ -85,21 +128,4 @@ done
 kill -KILL -- "-$sweep" 2>/dev/null || true
 echo "ladder.sh: the sweep ended with status $status after at most $minutes minutes (log: $STORE/$log)"
 
-# Keep: the database, artifacts under 2 MB but the networks (configs, episode tables, records), every training's
-# checkpoints (the replay memory is not in them).
-rm -rf "$STATE.new"
-mkdir -p "$STATE.new/artifacts" "$STATE.new/trainings"
-sqlite3 mlflow.db ".backup '$STATE.new/mlflow.db'" 2>/dev/null || cp mlflow.db "$STATE.new/mlflow.db"
-[ -d mlartifacts ] && rsync -a --max-size=2m --exclude='*.pt' --exclude='*.pth' --exclude='*.gif' mlartifacts/ "$STATE.new/artifacts/"
-[ -d checkpoints ] && rsync -a --include='*/' --include='*.pt' --include=mlflow_run_id --include='*.json' \
-  --exclude='*' --prune-empty-dirs checkpoints/ "$STATE.new/trainings/"
-rm -rf "$STATE"
-mv "$STATE.new" "$STATE"
-size_mb=$(du -sm "$STATE" | cut -f1)
-if [ "$size_mb" -gt "${LADDER_MAX_MB:-50}" ]; then
-  # A paper-sized network's last.pt (weights, target, Adam's moments) is over 100 MB: too large for git.
-  echo "ladder.sh: $STATE holds ${size_mb} MB, more than LADDER_MAX_MB=${LADDER_MAX_MB:-50}: too large to commit;" \
-    "carry it another way (or train this rung where it fits one session)" >&2
-else
-  echo "ladder.sh: commit $STATE (${size_mb} MB) to carry the rung to the next session"
-fi
+keep

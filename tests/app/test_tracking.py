@@ -207,6 +207,68 @@ def test_interrupted_training_resumes_the_same_run(launch: Path) -> None:
     assert sorted(m.step for m in history) == [64, 128, 192, 256]
 
 
+def _held_by_another_process(lock_file: Path) -> subprocess.Popen:
+    """Another process holds `lock_file` (as a job training that key holds its train.lock) until killed."""
+    code = ("import sys, time\nfrom filelock import FileLock\nlock = FileLock(sys.argv[1])\nlock.acquire()\n"
+            "print('held', flush=True)\ntime.sleep(600)\n")
+    other = subprocess.Popen([sys.executable, "-c", code, str(lock_file)], stdout=subprocess.PIPE, text=True)
+    assert other.stdout.readline().strip() == "held"
+    return other
+
+
+def test_a_stop_while_waiting_for_a_training_that_comes_free_does_not_reopen_it(launch: Path) -> None:
+    """A sweep's stop reaches the job that trains a key and the job waiting for it at once. The trainer
+    closes its run KILLED and frees the key; the waiter, whose lock comes free in the same moment,
+    must stop too, not reopen the run (which the stop would then leave RUNNING)."""
+    import threading
+
+    learner = FakeLearner(interrupt_after=128)
+    with pytest.raises(SystemExit):
+        run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    (killed,) = runs(launch, "train")
+    trainer = _held_by_another_process(launch / "checkpoints" / train_key(make_cfg()) / "train.lock")
+
+    def stop_both() -> None:  # the signal reaches this job, and the trainer lets go of the key
+        os.kill(os.getpid(), signal.SIGTERM)
+        trainer.kill()
+
+    timer = threading.Timer(0.5, stop_both)
+    timer.start()
+    try:
+        with pytest.raises(SystemExit) as stopped:
+            run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    finally:
+        timer.cancel()
+        trainer.kill()
+        trainer.wait()
+    assert stopped.value.code == 128 + signal.SIGTERM
+    (train,) = runs(launch, "train")
+    assert train.info.status == "KILLED" and "resumes" not in train.data.tags
+    assert len(learner.calls) == 1
+
+
+def test_a_stop_while_a_training_run_reopens_ends_it_killed(launch: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The stop arrives while a resumed training's run is being marked RUNNING again: the run ends KILLED."""
+    from mlflow.tracking import MlflowClient
+
+    learner = FakeLearner(interrupt_after=128)
+    with pytest.raises(SystemExit):
+        run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    update_run = MlflowClient.update_run
+
+    def stopped_while_updating(self, run_id, *args, **kwargs):  # noqa: ANN001, ANN202
+        os.kill(os.getpid(), signal.SIGTERM)
+        return update_run(self, run_id, *args, **kwargs)
+
+    monkeypatch.setattr(MlflowClient, "update_run", stopped_while_updating)
+    with pytest.raises(SystemExit):
+        run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    monkeypatch.undo()
+    (train,) = runs(launch, "train")
+    assert train.info.status == "KILLED"
+    assert len(learner.calls) == 1  # stopped before it trained again
+
+
 def _run_in_a_process(launch: Path, key: str) -> tuple[subprocess.Popen, str]:
     """Another process opens a training run of `key` and keeps working on it (sleeps)."""
     code = (

@@ -40,8 +40,9 @@ def test_the_retest_names_the_models_it_knows():
 def test_a_rung_stopped_by_its_time_resumes_on_a_new_machine_from_the_kept_state(tmp_path):
     env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state"), "LADDER_NICE": "1"}
     ours = Path("/proc/self/autogroup").read_text() if Path("/proc/self/autogroup").exists() else None
+    # Two scenarios of one seed: one job trains, the other waits for its training, and the stop reaches both.
     tiny = ("learner.total_steps=40000", "learner.warmup_steps=100", "eval.test_steps=64", "eval.test_envs=4",
-            "seed=0", "scenario='3'", "logging.checkpoint_every=200", "tracking.log_gif=false")
+            "seed=0", "scenario='1','2'", "logging.checkpoint_every=200", "tracking.log_gif=false")
     first = run("ladder.sh", "paper_steps", "1", *tiny, env=env, timeout=240)
     assert first.returncode == 0, first.stderr
     assert "ended with status 143" in first.stdout  # stopped by its time, not finished
@@ -54,12 +55,24 @@ def test_a_rung_stopped_by_its_time_resumes_on_a_new_machine_from_the_kept_state
     store = tmp_path / "runs" / "paper_steps"
     (written,) = store.glob("checkpoints/*/last.pt")
     assert (state / "trainings" / written.parent.name / "last.pt").read_bytes() == written.read_bytes()
-    with sqlite3.connect(state / "mlflow.db") as db:
-        statuses = db.execute("SELECT r.status FROM runs r JOIN tags t ON t.run_uuid = r.run_uuid "
-                              "WHERE t.key = 'stage' AND t.value = 'train'").fetchall()
-    assert statuses == [("KILLED",)]
+    assert training_statuses(state) == [("KILLED",)] and running(state) == []
     shutil.rmtree(tmp_path / "runs")  # a new machine: the store is gone
     second = run("ladder.sh", "paper_steps", "1", *tiny, env=env, timeout=240)
     assert second.returncode == 0 and "restored paper_steps" in second.stdout
     log = next((tmp_path / "runs" / "paper_steps").glob("sweep-*.log")).read_text()
     assert "resuming training run" in log
+    # The resumed training, stopped again, is kept KILLED too: nothing the next session reads as running.
+    assert training_statuses(state) == [("KILLED",)] and running(state) == []
+    only_kept = run("ladder.sh", "paper_steps", "keep", env=env)  # the store's state again, no sweep
+    assert only_kept.returncode == 0 and "commit" in only_kept.stdout and running(state) == []
+
+
+def training_statuses(state: Path) -> list[tuple[str]]:
+    with sqlite3.connect(state / "mlflow.db") as db:
+        return db.execute("SELECT r.status FROM runs r JOIN tags t ON t.run_uuid = r.run_uuid "
+                          "WHERE t.key = 'stage' AND t.value = 'train'").fetchall()
+
+
+def running(state: Path) -> list[tuple[str]]:
+    with sqlite3.connect(state / "mlflow.db") as db:
+        return db.execute("SELECT name FROM runs WHERE status = 'RUNNING'").fetchall()
