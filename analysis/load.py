@@ -29,7 +29,8 @@ PRESET_TAG = "preset"
 RESUMES_TAG = "resumes"  # on a training run: how many times it was stopped and resumed
 UNKNOWN_EXPERIMENT = "unknown"
 TOTAL_STEPS_PARAM = "params.learner.total_steps"
-# A training stopped before its last step, by a signal (its run KILLED, its last.pt resumes it): what it
+# A training stopped before its last step, by a signal (its run KILLED, its last.pt resumes it), or still
+# running when the store was read: what it
 # reached and what it cost so far (`analysis.costs`: CPU hours where logged). `step`: the last env step it
 # logged; `steps_per_s`: the rate it logged there, per CPU second where logged (what the rest of it would go
 # at); `stops`: its runs' `resumes` tag.
@@ -300,9 +301,15 @@ def load_store(tracking_uri: str | None = None, experiment: str = "hgm_repro") -
     if runs.empty:
         raise EmptyStoreError(f"experiment {experiment!r} in {uri} has no runs tagged with a stage "
                               "(train/eval): run `python -m hgm_repro` first")
-    # Failed and killed runs hold partial results that would bias the means.
-    bad = runs["status"].isin(["FAILED", "KILLED"])
-    dropped = [f"{int(bad.sum())} FAILED/KILLED run(s) left out"] if bad.any() else []
+    # Failed and killed runs hold partial results that would bias the means. A training run still RUNNING
+    # (the store read while it trains, or a job stopped before it could close its run) is under way, as a
+    # KILLED one is: its curves are a part, never the training's.
+    ended_badly = runs["status"].isin(["FAILED", "KILLED"])
+    under_way = runs["stage"].eq("train") & runs["status"].eq("RUNNING")
+    bad = ended_badly | under_way
+    dropped = [f"{int(ended_badly.sum())} FAILED/KILLED run(s) left out"] if ended_badly.any() else []
+    if under_way.any():
+        dropped.append(f"{int(under_way.sum())} training run(s) still RUNNING left out, read as under way")
     stopped = _stopped(client, runs)
     runs = runs[~bad]
     # A model trained and tested at several presets keeps one run per cell of each.
@@ -328,11 +335,11 @@ def _numbers(frame: pd.DataFrame, column: str) -> pd.Series:
 
 
 def _stopped(client: MlflowClient, runs: pd.DataFrame) -> pd.DataFrame:
-    """The trainings a signal stopped before their last step (KILLED training runs: each resumes from its
-    last.pt, in the same run), one per (model, seed, experiment preset), the latest; none that another run of
-    the same training finished."""
+    """The trainings under way: stopped before their last step (KILLED training runs: each resumes from its
+    last.pt, in the same run) or still RUNNING, one per (model, seed, experiment preset), the latest; none
+    that another run of the same training finished."""
     train = runs[runs["stage"] == "train"].assign(experiment=run_experiments(runs))
-    killed = train[train["status"] == "KILLED"]
+    killed = train[train["status"].isin(["KILLED", "RUNNING"])]
     finished = set(train.loc[train["status"] == "FINISHED", "train_key"].dropna())
     killed = killed[~killed["train_key"].isin(finished)]
     if killed.empty:

@@ -66,6 +66,22 @@ def test_a_stopped_training_is_read_with_its_steps_and_hours(store: tuple[str, s
     assert stopped_id not in set(data.runs["run_id"]) and "tk-steps-0" not in set(data.curves["train_key"])
 
 
+def test_a_training_still_running_is_under_way_not_a_result(tmp_path: Path) -> None:
+    """A store read while a rung trains (or left with a training RUNNING by a job that could not close it):
+    the training is under way, with its steps so far, and its curves stand in for no finished training."""
+    uri = write_store(tmp_path, SyntheticSpec(models=("proposed", "human"), seeds=(0,), scenarios=("3",),
+                                              episodes=2))
+    running = add_training(uri, "KILLED", 0, "tk-running", [(340_000, 88.0)], resumes="2")
+    MlflowClient(tracking_uri=uri).update_run(running, status="RUNNING")
+    data = load_store(uri)
+    assert list(data.stopped[["run_id", "step", "stops"]].itertuples(index=False, name=None)) == [
+        (running, 340_000, 2)]
+    assert running not in set(data.runs["run_id"]) and "tk-running" not in set(data.curves["train_key"])
+    assert any("still RUNNING" in note for note in data.dropped)
+    # The quick preset's own training of the same model and seed keeps its curves.
+    assert not data.curves[data.curves["model"] == "proposed"].empty
+
+
 def test_the_bundle_keeps_the_stopped_trainings_and_an_older_bundle_reads_none(store: tuple[str, str],
                                                                               tmp_path: Path) -> None:
     data = load_store(store[0])
