@@ -11,6 +11,7 @@ another preset (a rung of the scale ladder beside the quick grid) is kept beside
 from __future__ import annotations
 
 import pandas as pd
+import yaml
 
 from analysis.load import UNKNOWN_EXPERIMENT, StoreData, run_experiments
 
@@ -74,6 +75,17 @@ def _unique_join(values: list[str]) -> str:
     return "; ".join(dict.fromkeys(part for v in values for part in v.split("; ") if part))
 
 
+def config_preset(text: str) -> str:
+    """The experiment preset a resolved config names (`experiment.name`), else UNKNOWN_EXPERIMENT."""
+    try:
+        node = yaml.safe_load(text)
+    except yaml.YAMLError:
+        return UNKNOWN_EXPERIMENT
+    experiment = node.get("experiment") if isinstance(node, dict) else None
+    name = experiment.get("name") if isinstance(experiment, dict) else None
+    return str(name) if name else UNKNOWN_EXPERIMENT
+
+
 def combine(parts: list[StoreData]) -> StoreData:
     """`parts` as one StoreData; a (model, preset) cell held by a later part replaces that cell's runs of
     earlier parts."""
@@ -92,8 +104,12 @@ def combine(parts: list[StoreData]) -> StoreData:
             at = "" if preset == UNKNOWN_EXPERIMENT else f" ({preset})"
             dropped.append(f"model {model}{at} of {names[i]} replaced by a later source's runs of it")
         kept.append(_without(part, set(replaced)))
-        later_models = set().union(*(set(p.configs) for p in parts[i + 1:]))
-        configs.update({m: text for m, text in part.configs.items() if m not in later_models})
+        for model, text in part.configs.items():
+            # One config per model: a later source's replaces it when it is of the same preset (a cell
+            # published again), not when it is a rung at another preset beside the model's grid, whose
+            # config the report describes the grid by.
+            if model not in configs or config_preset(configs[model]) == config_preset(text):
+                configs[model] = text
         dropped += part.dropped
     tables = {}
     for name in _TABLES:

@@ -64,8 +64,12 @@ def test_the_same_model_at_another_preset_is_kept_beside_it() -> None:
     rung.evals = rung.evals.assign(experiment="paper_steps")
     grid.evals = grid.evals.assign(experiment="quick")
     grid.runs = grid.runs.assign(**{"params.experiment.name": "quick"})
+    grid.configs = {m: f"experiment: {{name: quick}}  # grid {m}\n" for m in grid.configs}
+    rung.configs = {"proposed": "experiment: {name: paper_steps}  # rung\n"}
     both = combine([grid, rung])
     assert both.dropped == []
+    # The report describes the grid by its models' configs: the rung's does not replace the grid's.
+    assert "# grid proposed" in both.configs["proposed"]
     for name in ("runs", "curves", "evals", "episodes"):
         assert len(getattr(both, name)) == len(getattr(grid, name)) + len(getattr(rung, name)), name
     assert both.evals.groupby("experiment")["model"].apply(set).to_dict() == {
