@@ -20,7 +20,7 @@ import pandas as pd
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, model_label
-from analysis.load import StoreData, main_experiments, no_stopped
+from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
 from analysis.tables import HEADLINE_METRICS, HEADLINE_SCENARIO, SAFE_COLLISIONS, beating_grid, headline, seeds_beating
@@ -338,7 +338,7 @@ def main_view(data: StoreData) -> StoreData:
     main = main_experiments(evals)
     if all(len(set(g)) <= 1 for _, g in evals.groupby("model")["experiment"]):
         return data
-    kept = evals[[main.get(str(m)) == e for m, e in zip(evals["model"], evals["experiment"], strict=True)]]
+    kept = at_main_experiments(evals)
     notes = []
     for model, group in evals[~evals.index.isin(kept.index)].groupby("model"):
         others = ", ".join(f"{e} ({n} evaluation runs)" for e, n in group["experiment"].value_counts().sort_index()

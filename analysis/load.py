@@ -123,6 +123,12 @@ def main_experiments(evals: pd.DataFrame) -> dict[str, str]:
             for model, group in evals.groupby("model")["experiment"]}
 
 
+def at_main_experiments(evals: pd.DataFrame) -> pd.DataFrame:
+    """The rows of `evals` at each model's main experiment preset: what every page but the scale ladder reads."""
+    main = main_experiments(evals)
+    return evals[[main.get(str(m)) == e for m, e in zip(evals["model"], evals["experiment"], strict=True)]]
+
+
 def default_tracking_uri() -> str:
     # Same default as the main app: a SQLite file in the directory the command started from.
     return f"sqlite:///{Path(os.getcwd()).resolve() / 'mlflow.db'}"
