@@ -345,25 +345,25 @@ def _stopped(client: MlflowClient, runs: pd.DataFrame) -> pd.DataFrame:
     last.pt, in the same run) or still RUNNING, one per (model, seed, experiment preset), the latest; none
     that another run of the same training finished."""
     train = runs[runs["stage"] == "train"].assign(experiment=run_experiments(runs))
-    killed = train[train["status"].isin(["KILLED", "RUNNING"])]
+    under_way = train[train["status"].isin(["KILLED", "RUNNING"])]
     finished = set(train.loc[train["status"] == "FINISHED", "train_key"].dropna())
-    killed = killed[~killed["train_key"].isin(finished)]
-    if killed.empty:
+    under_way = under_way[~under_way["train_key"].isin(finished)]
+    if under_way.empty:
         return no_stopped()
-    killed = killed.sort_values("start_time", ascending=False).drop_duplicates(["model", "seed", "experiment"])
-    curves = _curves(client, killed)
+    under_way = under_way.sort_values("start_time", ascending=False).drop_duplicates(["model", "seed", "experiment"])
+    curves = _curves(client, under_way)
     hours = hours_trained(curves)
     last_step = curves.groupby("train_key")["step"].max() if not curves.empty else pd.Series(dtype=float)
     out = pd.DataFrame({
-        "run_id": killed["run_id"].astype(str),
-        "model": killed["model"].astype(str),
-        "seed": killed["seed"],
-        "experiment": killed["experiment"].astype(str),
-        "train_key": killed["train_key"],
-        "step": killed["train_key"].map(last_step).fillna(0).astype(int),
-        "total_steps": _numbers(killed, TOTAL_STEPS_PARAM).astype(float),
-        "steps_per_s": killed["train_key"].map(last_rate(curves)).astype(float),
-        "hours": killed["train_key"].map(hours).fillna(0.0).astype(float),
-        "stops": _numbers(killed, RESUMES_TAG).fillna(0).astype(int),
+        "run_id": under_way["run_id"].astype(str),
+        "model": under_way["model"].astype(str),
+        "seed": under_way["seed"],
+        "experiment": under_way["experiment"].astype(str),
+        "train_key": under_way["train_key"],
+        "step": under_way["train_key"].map(last_step).fillna(0).astype(int),
+        "total_steps": _numbers(under_way, TOTAL_STEPS_PARAM).astype(float),
+        "steps_per_s": under_way["train_key"].map(last_rate(curves)).astype(float),
+        "hours": under_way["train_key"].map(hours).fillna(0.0).astype(float),
+        "stops": _numbers(under_way, RESUMES_TAG).fillna(0).astype(int),
     }, columns=STOPPED_COLUMNS)
     return out.sort_values(["experiment", "model", "seed"]).reset_index(drop=True)

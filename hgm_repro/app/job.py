@@ -52,6 +52,7 @@ from .trainings import (
     obtain_training,
     read_plan,
     run_status,
+    tested_training,
 )
 
 log = logging.getLogger(__name__)
@@ -143,7 +144,8 @@ def run_job(
             with run_status(tracker, launch_run) if launch_run else nullcontext():
                 if job.model.learned:
                     members = group_of(job, training_groups or {})
-                    training = obtain_training(members, tracker, parent_run_id, train_fn)
+                    training = (tested_training(job, tracker)
+                                or obtain_training(members, tracker, parent_run_id, train_fn))
                     validation_return = tracker.best_value(training.run_id, VALIDATION_RETURN)
                 else:
                     training = Training("none")

@@ -9,7 +9,8 @@ test scenarios trains each model and seed once. One call goes
    every other seed it can get, so that the group's other jobs wait for it instead of training alone;
 2. reuse: a FINISHED training run with the key in the store is not trained again (its checkpoint is on
    disk or fetched from the store); a run that stopped before it finished (its id is kept beside the
-   checkpoints) is resumed from `last.pt`, in the same MLflow run;
+   checkpoints) is resumed from `last.pt`, in the same MLflow run; a job whose test of a finished
+   training has finished needs no network at all (`tested_training`);
 3. open run: one MLflow training run per seed, tagged and described alike alone or in a group;
 4. train: `learner.train` for one seed, `learner.train_group` for several (one process, one loop);
 5. log: final.pt (and best.pt, ema.pt) as weights, the MLflow model and the checkpoint's path; each
@@ -46,7 +47,7 @@ from ..contracts.checkpoint import (
 from ..contracts.errors import ConfigError
 from ..contracts.interrupts import JobInterrupted, acquire_stoppably
 from ..contracts.schema import JobConfig, check_config
-from ..contracts.train_key import EVALUATION_VERSION, train_key, training_config
+from ..contracts.train_key import EVALUATION_VERSION, evaluation_key, train_key, training_config
 from ..learner.grouped import group_key, use_grouped
 from .descriptions import config_yaml, training_description
 from .provenance import run_tags
@@ -147,6 +148,19 @@ def obtain_training(
         if to_train:
             found.update(_train(to_train, tracker, parent_run_id, train_fn))
     return found[train_key(job)]
+
+
+def tested_training(job: JobConfig, tracker: Tracker) -> Training | None:
+    """A FINISHED training of the job's key whose test of this job has FINISHED too: the job has nothing
+    left to do, so its network need not be on this machine. A network too large to carry between machines
+    (the paper's image size) is then not trained again because it is gone. Only the newest training of the
+    key counts, the one `obtain_training` would reuse; `force_retrain` asks for a new one, so it finds none."""
+    if job.force_retrain:
+        return None
+    newest = next(iter(tracker.finished_trainings(train_key(job))), None)
+    if newest is None or tracker.finished_evaluation(evaluation_key(job), newest.info.run_id) is None:
+        return None
+    return Training("reused", newest.info.run_id)
 
 
 def training_lock(tracker: Tracker, key: str) -> tuple[FileLock, Path]:

@@ -3,7 +3,8 @@
 # parts that each fit a session: the sweep runs for MINUTES, then every job is stopped with SIGTERM (each
 # writes last.pt and marks its runs KILLED), and what a later session needs to go on is kept in
 # research/studies/ladder_state/RUNG/, which is committed: the store's database, its small artifacts and
-# each training's checkpoints. The replay memory is not kept (runtime.checkpoint_buffer_max_mb=0): a
+# each training's checkpoints (a finished training's networks only while small: a paper_pixels training, whose
+# last.pt is over 100 MB, must finish and be tested within one session). The replay memory is not kept (runtime.checkpoint_buffer_max_mb=0): a
 # resumed training refills it before it learns again, so it is not the run an uninterrupted one would be
 # (docs/usage.md, "Interrupting and resuming"). Run the same command in the next session: the state is
 # restored into the store (research/studies/runs/ladder/RUNG/, not committed) and the sweep goes on;
@@ -68,9 +69,20 @@ PY
     (cd mlartifacts && find . -type f -size -2049k ! -name '*.pt' ! -name '*.pth' ! -name '*.gif' \
       -exec cp -p --parents {} "$STATE.new/artifacts/" \;)
   fi
+  # A finished training's networks only while small: the paper's image size makes them tens of MB, and a job
+  # whose test is done needs none (`tested_training`); a test not yet run then trains the key again.
   if [ -d checkpoints ]; then
-    (cd checkpoints && find . -type f \( -name '*.pt' -o -name mlflow_run_id -o -name '*.json' \) \
-      -exec cp -p --parents {} "$STATE.new/trainings/" \;)
+    for dir in checkpoints/*/; do
+      name=$(basename "$dir")
+      networks_mb=$(find "$dir" -type f -name '*.pt' -printf '%s\n' | awk '{s += $1} END {print int(s / 1048576)}')
+      kept=( -name mlflow_run_id -o -name '*.json' -o -name '*.pt' )
+      if [ -f "$dir/final.pt" ] && [ "$networks_mb" -gt "${LADDER_MAX_NETWORK_MB:-20}" ]; then
+        kept=( -name mlflow_run_id -o -name '*.json' )
+        echo "ladder.sh: the finished training $name's networks (${networks_mb} MB) are not kept: its tests are in" \
+          "the store; a test not yet run trains it again"
+      fi
+      (cd checkpoints && find "$name" -type f \( "${kept[@]}" \) -exec cp -p --parents {} "$STATE.new/trainings/" \;)
+    done
   fi
   rm -rf "$STATE"
   mv "$STATE.new" "$STATE"

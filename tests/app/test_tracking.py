@@ -352,6 +352,36 @@ def test_a_finished_evaluation_is_not_repeated(launch: Path) -> None:
     assert other.eval_run_id != first.eval_run_id and len(runs(launch, "eval")) == 2
 
 
+def _lose_the_network(launch: Path, train_run_id: str) -> None:
+    """The trained network gone from this machine and from the store, as after a move to a fresh machine
+    that carried the store's database but not networks too large for git."""
+    shutil.rmtree(launch / "checkpoints")
+    artifacts = store(launch).client.get_run(train_run_id).info.artifact_uri.removeprefix("file://")
+    shutil.rmtree(Path(artifacts) / "checkpoint")
+
+
+def test_a_tested_training_needs_no_network_until_a_new_test(launch: Path) -> None:
+    first = run_job(make_cfg(), launch, train_fn=FakeLearner(), evaluate_fn=fake_evaluate)
+    _lose_the_network(launch, first.training.run_id)
+    learner = FakeLearner()
+    again = run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert not learner.calls and again.training.how == "reused"
+    assert again.training.run_id == first.training.run_id and again.eval_run_id == first.eval_run_id
+    assert len(runs(launch, "train")) == 1 and len(runs(launch, "eval")) == 1
+    # A test not yet run needs the network: with none left, the key trains again.
+    other = run_job(make_cfg("eval.test_steps=32"), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert len(learner.calls) == 1 and other.training.how == "trained"
+    # force_retrain asks for a new training even where the test is done.
+    forced = run_job(make_cfg("force_retrain=true", "eval.test_steps=32"), launch, train_fn=learner,
+                     evaluate_fn=fake_evaluate)
+    assert len(learner.calls) == 2 and forced.training.run_id not in {first.training.run_id,
+                                                                      other.training.run_id}
+    # The newest training is the one a test reads: the first test, done on an older one, does not stand for it.
+    newest = run_job(make_cfg(), launch, train_fn=learner, evaluate_fn=fake_evaluate)
+    assert newest.training.run_id == forced.training.run_id and newest.eval_run_id != first.eval_run_id
+    assert len(learner.calls) == 2
+
+
 def test_a_store_from_another_version_is_named(launch: Path) -> None:
     tracker = store(launch)
     tracker.client.set_experiment_tag(tracker.experiment_id, STORE_FORMAT_TAG, "0")

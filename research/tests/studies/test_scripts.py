@@ -67,6 +67,27 @@ def test_a_rung_stopped_by_its_time_resumes_on_a_new_machine_from_the_kept_state
     assert only_kept.returncode == 0 and "commit" in only_kept.stdout and running(state) == []
 
 
+def test_the_kept_state_leaves_out_a_finished_trainings_large_networks(tmp_path):
+    store = tmp_path / "runs" / "paper_pixels"
+    sizes = {"large_finished": {"final.pt": 15, "best.pt": 15}, "small_finished": {"final.pt": 2, "best.pt": 2},
+             "large_unfinished": {"last.pt": 30}}
+    for training, files in sizes.items():
+        (store / "checkpoints" / training).mkdir(parents=True)
+        (store / "checkpoints" / training / "mlflow_run_id").write_text(training)
+        for name, mb in files.items():
+            with open(store / "checkpoints" / training / name, "wb") as f:
+                f.truncate(mb * 1024 * 1024)  # sparse: the size is what counts
+    sqlite3.connect(store / "mlflow.db").close()
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    done = run("ladder.sh", "paper_pixels", "keep", env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "large_finished's networks (30 MB) are not kept" in done.stdout
+    trainings = tmp_path / "state" / "paper_pixels" / "trainings"
+    kept = {training: sorted(p.name for p in (trainings / training).iterdir()) for training in sizes}
+    assert kept == {"large_finished": ["mlflow_run_id"], "small_finished": ["best.pt", "final.pt", "mlflow_run_id"],
+                    "large_unfinished": ["last.pt", "mlflow_run_id"]}
+
+
 def training_statuses(state: Path) -> list[tuple[str]]:
     with sqlite3.connect(state / "mlflow.db") as db:
         return db.execute("SELECT r.status FROM runs r JOIN tags t ON t.run_uuid = r.run_uuid "
