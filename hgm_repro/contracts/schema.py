@@ -25,7 +25,6 @@ from .config_files import scenario_config, simulator_config
 from .config_tree import plain
 from .errors import ConfigError
 from .observation_config import ObservationConfig
-from .runtime_choice import check_update_dtype
 from .simulator_config import ScenarioConfig, SimulatorConfig
 
 
@@ -391,7 +390,10 @@ def check_config(cfg: DictConfig | Mapping[str, Any]) -> JobConfig:
     if isinstance(learner, LearnerSchema) and learner.ema_decay >= 1.0:
         errors.append(f"learner.ema_decay={learner.ema_decay} is not allowed: must be in [0, 1) (0 = off)")
     runtime = parts["runtime"]
-    if isinstance(runtime, RuntimeSchema):
+    if isinstance(runtime, RuntimeSchema) and runtime.update_dtype == "bfloat16":
+        # Only bf16 asks the device (torch): a bad value elsewhere is refused before torch is imported.
+        from .runtime_choice import check_update_dtype
+
         try:
             check_update_dtype(runtime.update_dtype, str(root.get("device", "cpu")))
         except (ValueError, RuntimeError) as e:

@@ -25,9 +25,11 @@ def environment(**extra: str) -> dict[str, str]:
     return {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO_ROOT), os.environ.get("PYTHONPATH", "")]), **extra}
 
 
-def hgm(cwd: Path, *args: str, check: bool = True, timeout: float = 900) -> subprocess.CompletedProcess[str]:
-    """`python -m hgm_repro *args` in `cwd`; with `check`, its exit code must be 0."""
-    out = subprocess.run(command(*args), cwd=cwd, env=environment(), capture_output=True, text=True,
+def hgm(cwd: Path, *args: str, check: bool = True, timeout: float = 900,
+        env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """`python -m hgm_repro *args` in `cwd`, with `env` added to the environment; with `check`, its exit
+    code must be 0."""
+    out = subprocess.run(command(*args), cwd=cwd, env=environment(**(env or {})), capture_output=True, text=True,
                          timeout=timeout)
     if check:
         assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-5000:]
