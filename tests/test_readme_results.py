@@ -123,3 +123,43 @@ def test_the_readme_gives_each_claim_the_reports_verdict():
         said |= {int(n): word for n in re.findall(r"\d+", numbers)}
     claims = pd.read_csv(BUNDLE / "report" / "claims.csv")
     assert said == dict(zip(claims["claim"].astype(int), claims["verdict"], strict=True))
+
+
+# The README's scale-ladder table: each row's label begins with its rung (the human-driven host: the quick rung's).
+LADDER_ROWS = {"quick": ("quick", "proposed"), "the paper's steps": ("paper_steps", "proposed"),
+               "the paper's pixels": ("paper_pixels", "proposed"), "human-driven host": ("quick", "human")}
+LADDER_CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?)(?: \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\])?$")
+
+
+def _ladder_mismatches(section: str, ladder: pd.DataFrame) -> list[str]:
+    """Every cell of the README's scale-ladder table that differs from the report's scale_ladder.csv."""
+    table = ladder.set_index(["rung", "model"])
+    wrong, seen = [], set()
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        row = next((r for prefix, r in LADDER_ROWS.items() if line.startswith("|") and cells[0].startswith(prefix)),
+                   None)
+        if row is None:
+            continue
+        seen.add(row)
+        for cell, column in zip(cells[1:3], ("episode_return", "collisions"), strict=True):
+            parsed = LADDER_CELL.match(cell)
+            want = [table.loc[row, f"{column}/{part}"] for part in ("point", "low", "high")]
+            shown = [g for g in parsed.groups() if g is not None] if parsed else []
+            if not shown or not all(map(_same_to_the_printed_digit, shown, want)):
+                wrong.append(f"{cells[0]}, {column}: {cell!r}, the report {want}")
+        hours = table.loc[row, "training_hours"]  # none for a host that does not train: "-"
+        if cells[3] != "-" if pd.isna(hours) else cells[3] == "-" or not _same_to_the_printed_digit(cells[3], hours):
+            wrong.append(f"{cells[0]}, CPU-hours: {cells[3]!r}, the report {hours}")
+    missing = set(LADDER_ROWS.values()) - seen
+    return wrong + ([f"rows {sorted(missing)} are not in the table"] if missing else [])
+
+
+@pytest.mark.skipif(not (BUNDLE / "report" / "scale_ladder.csv").is_file(), reason="no committed scale ladder")
+def test_the_readmes_scale_ladder_is_the_reports():
+    section = _results_section()
+    ladder = pd.read_csv(BUNDLE / "report" / "scale_ladder.csv")
+    assert _ladder_mismatches(section, ladder) == []
+    # The check can fail: one number of the table changed is caught.
+    changed = section.replace("| 143 |", "| 144 |", 1)
+    assert changed != section and _ladder_mismatches(changed, ladder) != []
