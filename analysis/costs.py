@@ -5,8 +5,8 @@ A training logs at each log point its rate since the last one: env steps per sec
 other load on a shared machine does not slow. The hours are the env steps between two log points over the rate
 logged at the second, summed: a training stopped in one session and resumed in the next counts only the time
 it trained, not the time it lay stopped. CPU hours take the CPU rate where a log point has it and its wall
-rate where it does not (a training logged before the CPU rate was); with one torch thread per job, as the
-ladder's trainings run, a CPU hour is a core hour.
+rate where it does not (a training logged before the CPU rate was, with one torch thread per job). The CPU
+time counts every thread of the process, so a CPU hour is a core hour for a job on one core or on two.
 """
 
 from __future__ import annotations

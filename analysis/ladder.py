@@ -313,7 +313,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "trainings of the CPU time spent training (env steps over the rate logged per second of the training "
              "process's CPU time, summed over the logged intervals, so that neither the other load on a shared "
              "machine nor a stop between sessions counts; a training that logged only its wall-clock rate counts "
-             "its wall time; one torch thread per job, so a CPU-hour is a core-hour); stops: how many times "
+             "its wall time; the CPU time counts every thread of the process, so a CPU-hour is a core-hour whether "
+             "the training ran on one core or, alone, on two); stops: how many times "
              "its trainings were stopped and resumed, each without its replay memory.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
