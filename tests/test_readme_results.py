@@ -149,7 +149,11 @@ def _ladder_mismatches(section: str, ladder: pd.DataFrame) -> list[str]:
             if not shown or not all(map(_same_to_the_printed_digit, shown, want)):
                 wrong.append(f"{cells[0]}, {column}: {cell!r}, the report {want}")
         hours = table.loc[row, "training_hours"]  # none for a host that does not train: "-"
-        if cells[3] != "-" if pd.isna(hours) else cells[3] == "-" or not _same_to_the_printed_digit(cells[3], hours):
+        if pd.isna(hours):
+            hours_right = cells[3] == "-"
+        else:
+            hours_right = cells[3] != "-" and _same_to_the_printed_digit(cells[3], hours)
+        if not hours_right:
             wrong.append(f"{cells[0]}, CPU-hours: {cells[3]!r}, the report {hours}")
     missing = set(LADDER_ROWS.values()) - seen
     return wrong + ([f"rows {sorted(missing)} are not in the table"] if missing else [])
