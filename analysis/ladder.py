@@ -19,7 +19,7 @@ import pandas as pd
 
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
-from analysis.labels import LEARNED, METRIC_LABELS, model_label
+from analysis.labels import LEARNED, METRIC_LABELS, fmt, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
@@ -283,6 +283,40 @@ def progress_text(states: pd.DataFrame) -> str:
     return (text + f" Left: about {left:.0f} CPU-hours of training, at the {per_training:.1f} CPU-hours one "
             "training takes as measured on this rung (its tested trainings, else a stopped one's hours so far and "
             "the rest of its steps at the rate it logged last), and the tests.")
+
+
+def _method_words(row: pd.Series, expected: int) -> str:
+    """'Proposed 80.3 return and 0.640 collisions per episode (1 of 5 seeds, no CI), 0 of 1 beating the
+    human-driven host', or 'Min not run'."""
+    name = model_label(str(row["model"]), short=True)
+    n = int(row["seeds"])
+    if not n:
+        return f"{name} {NOT_RUN}"
+    # The seeds are said once, after both numbers: a single seed's number stands alone.
+    return_, collisions = (fmt_estimate(row[f"{m}/point"], row[f"{m}/low"], row[f"{m}/high"], n, m) if n > 1
+                           else fmt(row[f"{m}/point"], m) for m in HEADLINE_METRICS)
+    seeds = f"{n} of {expected} seeds" if expected else f"{n} seeds"
+    return (f"{name} {return_} return and {collisions} collisions per episode ({seeds}{', no CI' if n < 2 else ''}), "
+            f"{row['beating']} of {row['paired_seeds']} beating the human-driven host")
+
+
+def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> list[str]:
+    """What the rungs that the report's other pages do not show (`shown`: their presets) found so far, one line
+    per rung, with `expected` seeds per method, for the report's first page beside the scale of its runs; none
+    while no such rung has run."""
+    above = numbers[~numbers["rung"].isin(shown) & numbers["model"].isin(LEARNED)]
+    if not above["seeds"].gt(0).any():
+        return []
+    lines = []
+    for name in [r for r in RUNGS if r in set(above["rung"])]:
+        rows = above[above["rung"] == name]
+        label = RUNGS[name][0].upper() + RUNGS[name][1:]
+        if not rows["seeds"].any():
+            lines.append(f"{label}: {NOT_RUN} yet (the scale-ladder section).")
+            continue
+        lines.append(f"{label}, scenario {HEADLINE_SCENARIO}, the scale-ladder section: "
+                     + "; ".join(_method_words(row, expected) for _, row in rows.iterrows()) + ".")
+    return lines
 
 
 def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:

@@ -71,8 +71,9 @@ def headline_lines(evals: pd.DataFrame, scenarios: list[str]) -> list[str]:
 def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: dict[str, str],
                      evals: pd.DataFrame, commits: list[str], figures: dict[str, dict[str, Path]],
                      out_dir: Path, beating: pd.DataFrame | None = None,
-                     sections: list[Section] | None = None) -> str:
-    """The Markdown text; figure links are relative to `out_dir`, where results.md is written."""
+                     sections: list[Section] | None = None, ladder_lines: list[str] | None = None) -> str:
+    """The Markdown text; figure links are relative to `out_dir`, where results.md is written. `ladder_lines`:
+    what the scale ladder's other rungs found (`analysis.ladder.page_one_lines`), said with the scale."""
     scenarios = [s for s in SCENARIOS if s in set(summary["scenario"])] \
         or sorted(set(summary["scenario"]))
     banner = ["**Smoke run: not a result.** The `smoke` preset trains for seconds to prove that the pipeline "
@@ -83,7 +84,7 @@ def results_markdown(summary: pd.DataFrame, claims: list[ClaimResult], configs: 
              "## The paper's claims in one line each", "",
              *[f"{c.number}. {c.statement} **{c.verdict}**: {verdict_sentence(c)}" for c in claims], "",
              coverage_text(), "",
-             "## Scale", "", *[f"- {line}" for line in scale_lines(configs, evals)], "",
+             "## Scale", "", *[f"- {line}" for line in [*scale_lines(configs, evals), *(ladder_lines or [])]], "",
              f"Runs from commit{'s' if len(commits) != 1 else ''} {', '.join(c[:10] for c in commits) or 'unknown'}. "
              "Every other table: mean over seeds [95% t interval over seeds].", "",
              "## Test return per episode (the paper's Table 6; its numbers in parentheses)", "",

@@ -16,7 +16,7 @@ from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
 from analysis.figures import TRAINING_FIGURES, make_figures
 from analysis.labels import LEARNED, PROBES, REFERENCE_HOSTS, SCENARIOS, fmt, model_label, ordered_models
-from analysis.load import EVAL_METRICS, StoreData
+from analysis.load import EVAL_METRICS, StoreData, main_experiments
 from analysis.markdown import results_markdown
 from analysis.pictures import pictures_figure, scenario_pictures
 from analysis.report import SHARED_CONFIG, ReportInputs, fmt_estimate, write_report
@@ -210,6 +210,8 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     # The ladder reads every preset's runs; every other page one preset per model.
     ladder_section, ladder_numbers, ladder_verdicts, ladder_trainings = ladder.section(
         with_cv_ratio(data.evals, data.runs), data.curves, data.episodes, data.runs, data.stopped)
+    ladder_lines = ladder.page_one_lines(ladder_numbers, set(main_experiments(data.evals).values()),
+                                         len(ladder.expected_seeds(data.evals)))
     data = ladder.main_view(data)
     evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)
@@ -271,12 +273,12 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
         headline=tables.headline(evals[~evals["model"].isin(PROBES)], scenarios), intervals=coverage_text(),
         git_dirty=data.git_dirty, scenario_mix=scenario_mix(data.runs),
         train_keys=sorted(str(k) for k in train_runs["train_key"].dropna().unique()),
-        scale=scale_lines(data.configs, evals), smoke=is_smoke(data.configs), source=data.source,
+        scale=scale_lines(data.configs, evals) + ladder_lines, smoke=is_smoke(data.configs), source=data.source,
         config_runs=_config_runs(data.configs), sections=sections,
     )
     markdown = out_dir / "results.md"
     markdown.write_text(results_markdown(summary, results, data.configs, evals, data.git_commits, figures, out_dir,
-                                         beating, sections))
+                                         beating, sections, ladder_lines))
     csvs.append(markdown)
     report = write_report(inputs, out_dir / "report.pdf")
     return Outputs(report=report, figures=figures, csvs=csvs)
