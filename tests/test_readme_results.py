@@ -165,5 +165,5 @@ def test_the_readmes_scale_ladder_is_the_reports():
     ladder = pd.read_csv(BUNDLE / "report" / "scale_ladder.csv")
     assert _ladder_mismatches(section, ladder) == []
     # The check can fail: one number of the table changed is caught.
-    changed = section.replace("| 143 |", "| 144 |", 1)
+    changed = section.replace("| 80 |", "| 81 |", 1)
     assert changed != section and _ladder_mismatches(changed, ladder) != []
