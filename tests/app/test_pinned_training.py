@@ -28,6 +28,11 @@ PINNED_MEANS = {f"eval/{m}" for m in EPISODE_METRICS} | {"eval/episodes"}
 PINNED_WEIGHTS = "673eca68ef6273ee"
 PINNED_CURVES = "2f115ca995bc2eff"
 PINNED_EVALUATION = "b46c4ff3d26a2985"
+# The same code on a second CPU of this project's machines (Xeon with AMX and avx512_fp16): torch's float32
+# kernels round differently there in the last digits, so the weights and curves hash otherwise (the test's means
+# do not move). A run matches one machine's pin.
+PINS = ({"weights": PINNED_WEIGHTS, "curves": PINNED_CURVES, "evaluation": PINNED_EVALUATION},
+        {"weights": "a91d3fcfa3328e3d", "curves": "922a63e1b0f4c60d", "evaluation": PINNED_EVALUATION})
 
 
 def _digest(data: bytes) -> str:
@@ -61,5 +66,5 @@ def fingerprint(launch: Path) -> dict[str, str]:
 
 
 def test_the_smoke_training_is_bit_for_bit_the_pinned_one(tmp_path: Path):
-    assert fingerprint(tmp_path.resolve()) == {
-        "weights": PINNED_WEIGHTS, "curves": PINNED_CURVES, "evaluation": PINNED_EVALUATION}
+    ran = fingerprint(tmp_path.resolve())
+    assert ran in PINS, ran

@@ -27,6 +27,11 @@ PINNED = {
           "val/episode_return": -6.125},
 }
 PINNED_WEIGHTS = "05938ae99431cb22"  # sha256 of the final network's tensors, in state_dict order
+# The same code on a second CPU of this project's machines (Xeon with AMX and avx512_fp16): torch's float32
+# kernels round one loss in the last digits differently there, and so the weights. A run matches one machine's pin.
+PINNED_OTHER_CPU = {**PINNED, 96: {**PINNED[96], "train/loss": 63.454208}}
+PINNED_WEIGHTS_OTHER_CPU = "ac313ea6217956b0"
+PINS = ((PINNED, PINNED_WEIGHTS), (PINNED_OTHER_CPU, PINNED_WEIGHTS_OTHER_CPU))
 
 
 def _weights_digest(network: dict[str, torch.Tensor]) -> str:
@@ -43,9 +48,9 @@ def test_a_smoke_training_logs_what_the_solo_loop_logged(pinned_run):
     final, log = pinned_run
     logged = dict(log.calls)
     assert sorted(logged) == sorted(PINNED)
-    for step, values in PINNED.items():
-        assert {k: round(logged[step][k], 6) for k in values} == values, step
-    assert _weights_digest(load_checkpoint(final)["network"]) == PINNED_WEIGHTS
+    ran = ({step: {k: round(logged[step][k], 6) for k in values} for step, values in PINNED.items()},
+           _weights_digest(load_checkpoint(final)["network"]))
+    assert ran in PINS, ran
 
 
 def test_a_group_trains_with_every_learner_option(tmp_path: Path):
