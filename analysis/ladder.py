@@ -286,18 +286,20 @@ def progress_text(states: pd.DataFrame) -> str:
 
 
 def _method_words(row: pd.Series, expected: int) -> str:
-    """'Proposed 80.3 return and 0.640 collisions per episode (1 of 5 seeds, no CI), 0 of 1 beating the
-    human-driven host', or 'Min not run'."""
-    name = model_label(str(row["model"]), short=True)
+    """'Proposed 80.3 return, 0.640 collisions per episode (1 of 5 seeds, no CI; 0 of 1 beat the human-driven
+    host)' for a method with tests on the rung."""
     n = int(row["seeds"])
-    if not n:
-        return f"{name} {NOT_RUN}"
     # The seeds are said once, after both numbers: a single seed's number stands alone.
     return_, collisions = (fmt_estimate(row[f"{m}/point"], row[f"{m}/low"], row[f"{m}/high"], n, m) if n > 1
                            else fmt(row[f"{m}/point"], m) for m in HEADLINE_METRICS)
     seeds = f"{n} of {expected} seeds" if expected else f"{n} seeds"
-    return (f"{name} {return_} return and {collisions} collisions per episode ({seeds}{', no CI' if n < 2 else ''}), "
-            f"{row['beating']} of {row['paired_seeds']} beating the human-driven host")
+    return (f"{model_label(str(row['model']), short=True)} {return_} return, {collisions} collisions per episode "
+            f"({seeds}{', no CI' if n < 2 else ''}; {row['beating']} of {row['paired_seeds']} beat the human-driven "
+            "host)")
+
+
+def _and(names: list[str]) -> str:
+    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
 
 
 def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> list[str]:
@@ -312,10 +314,12 @@ def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> lis
         rows = above[above["rung"] == name]
         label = RUNGS[name][0].upper() + RUNGS[name][1:]
         if not rows["seeds"].any():
-            lines.append(f"{label}: {NOT_RUN} yet (the scale-ladder section).")
+            lines.append(f"{label}: {NOT_RUN} yet (scale ladder).")
             continue
-        lines.append(f"{label}, scenario {HEADLINE_SCENARIO}, the scale-ladder section: "
-                     + "; ".join(_method_words(row, expected) for _, row in rows.iterrows()) + ".")
+        tested = [_method_words(row, expected) for _, row in rows.iterrows() if row["seeds"]]
+        missing = [model_label(str(m), short=True) for m in rows.loc[rows["seeds"] == 0, "model"]]
+        lines.append(f"{label}, scenario {HEADLINE_SCENARIO} (scale ladder): " + "; ".join(tested)
+                     + (f"; {_and(missing)} {NOT_RUN}" if missing else "") + ".")
     return lines
 
 

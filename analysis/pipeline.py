@@ -130,7 +130,7 @@ def _training_numbers(curves: pd.DataFrame) -> dict[str, pd.DataFrame]:
             row = {"Method": model_label(model, short=True)}
             for label, values in measures.items():
                 v = values.loc[values["model"] == model, "value"].to_numpy(dtype=float)
-                e = mean_ci(v[np.isfinite(v)])
+                e = tables.in_range(mean_ci(v[np.isfinite(v)]), metric)  # a level or a spread of a count or a speed
                 row["Seeds"] = str(e.n)
                 row[label] = fmt_estimate(e.point, e.low, e.high, e.n, metric, digits=3 if "Fluct" in label else 2)
             rows.append(row)

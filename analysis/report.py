@@ -228,14 +228,15 @@ def headline_rows(headline: pd.DataFrame) -> list[list[str]]:
 HEADLINE_NOTE = (f"Per test episode: mean over seeds [its 95 % interval over seeds]. Scenario "
                  f"{HEADLINE_SCENARIO} has the training traffic's mix (CV ratio 0.5); the mean of scenarios averages "
                  "each seed over scenarios 1-5 first. An episode ends at its time limit or at the host's first "
-                 "collision, so collisions per episode is the share of episodes that end in a crash.")
+                 "collision, so collisions per episode is the share of episodes that end in a crash, and its "
+                 "interval is cut to [0, 1].")
 
 
 def _claims_table(w: ReportWriter, claims: Sequence[ClaimResult]) -> None:
     """One row per claim: the claim, its verdict in colour, and the sentence that says what decides it."""
-    w.pdf.set_font("DejaVu", size=8)
+    w.pdf.set_font("DejaVu", size=7.5)
     w.keep(20)
-    with w.pdf.table(col_widths=[3.2, 1.05, 3.9], text_align=["LEFT", "CENTER", "LEFT"], line_height=3.9,
+    with w.pdf.table(col_widths=[2.9, 1.0, 4.3], text_align=["LEFT", "CENTER", "LEFT"], line_height=3.5,
                      headings_style=FontFace(emphasis="BOLD", fill_color=(230, 234, 240)), padding=(0.8, 1.2),
                      width=w.width) as table:
         head = table.row()
@@ -282,12 +283,9 @@ def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
     _claims_table(w, inp.claims)
     if inp.intervals:
         w.para(inp.intervals, size=7.5, italic=True)
-    w.heading("Scale of these runs", keep_mm=15)
-    w.bullets(inp.scale or ["Scale unknown."], size=8)
-    pdf.set_font("DejaVu", "I", 8)
-    pdf.multi_cell(0, 4, "Every number and verdict in this report holds at this scale only.", new_x="LMARGIN",
-                   new_y="NEXT")
-    pdf.set_font("DejaVu", size=10)
+    # The heading says what the scale means, so that the lines under it fit the first page.
+    w.heading("Scale of these runs: every number and verdict holds at this scale only", keep_mm=15)
+    w.bullets(inp.scale or ["Scale unknown."], size=7.5)
     w.space(2)
     info = [
         ["Generated", dt.datetime.now().strftime("%Y-%m-%d %H:%M")],

@@ -11,7 +11,7 @@ import pandas as pd
 from analysis.labels import SAFEST, fmt, model_label, ordered_models
 from analysis.sections import Section
 from analysis.stats import NO_DATA, Estimate, mean_ci, per_seed
-from analysis.tables import HEADLINE_SCENARIO, NON_NEGATIVE, per_scenario
+from analysis.tables import HEADLINE_SCENARIO, in_range, per_scenario
 from hgm_repro.contracts.names import SAFEST_REFUSED, SAFEST_TAGS
 
 TITLE = "The safest network beside best.pt"
@@ -27,13 +27,13 @@ def _series(evals: pd.DataFrame, model: str, metric: str, scenario: str | None) 
     return per_seed(strata) if strata else pd.Series(dtype=float)
 
 
-def _cell(est: Estimate, metric: str, floor: bool = True) -> str:
+def _cell(est: Estimate, metric: str, ranged: bool = True) -> str:
     if est.n == 0:
         return "-"
     if not est.has_ci:
         return f"{fmt(est.point, metric)} (1 seed)"
-    low = max(est.low, 0.0) if floor and metric in NON_NEGATIVE else est.low  # a mean of counts lies above 0
-    return f"{fmt(est.point, metric)} [{fmt(low, metric)}, {fmt(est.high, metric)}]"
+    est = in_range(est, metric) if ranged else est  # a difference has no such range
+    return f"{fmt(est.point, metric)} [{fmt(est.low, metric)}, {fmt(est.high, metric)}]"
 
 
 def paired(evals: pd.DataFrame, host: str, metric: str, scenario: str | None) -> Estimate:
@@ -124,8 +124,8 @@ def sentences(evals: pd.DataFrame, refused: pd.DataFrame | None = None) -> list[
             continue
         ret, crashes = paired(evals, host, "episode_return", None), paired(evals, host, "collisions", None)
         text = (f"{label}: the safest network minus best.pt, over the {ret.n} seed{'s' if ret.n != 1 else ''} tested "
-                f"both ways and every scenario, changes the return by {_cell(ret, 'episode_return', floor=False)} "
-                f"per episode and the collisions by {_cell(crashes, 'collisions', floor=False)}")
+                f"both ways and every scenario, changes the return by {_cell(ret, 'episode_return', ranged=False)} "
+                f"per episode and the collisions by {_cell(crashes, 'collisions', ranged=False)}")
         if not mine.empty:
             text += f". Of its other trainings, {_refused_words(mine)}"
         trained = set(evals.loc[evals["model"] == host, "seed"])

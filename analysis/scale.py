@@ -11,7 +11,7 @@ from typing import Any
 import pandas as pd
 import yaml
 
-from analysis.labels import model_label, ordered_models
+from analysis.labels import GUARDED, LAYER_AT_TEST, SAFEST, model_label, ordered_models
 
 PAPER_STEPS = 1_000_000
 SMOKE_PRESET = "smoke"
@@ -50,7 +50,7 @@ def scale_lines(configs: dict[str, str], evals: pd.DataFrame) -> list[str]:
     for preset, models in groups.items():
         config = learned[models[0]]
         learner, obs = config.get("learner", {}), config.get("observation", {})
-        part = [f"{preset} ({', '.join(model_label(m, short=True) for m in models)}): "
+        part = [f"{preset} ({models_phrase(models)}): "
                 f"{learner.get('total_steps', 0):,} training steps per seed (paper {PAPER_STEPS:,})",
                 f"images {obs.get('height')}x{obs.get('width')}, {obs.get('frame_stack')} frames (paper 84x84, 4)",
                 f"tested with the {config.get('eval', {}).get('checkpoint', 'final')} checkpoint (paper: the final "
@@ -64,6 +64,33 @@ def scale_lines(configs: dict[str, str], evals: pd.DataFrame) -> list[str]:
         lines.append(f"{', '.join(presets(configs)) or 'unnamed preset'}: no learned model"
                      + (f"; {episodes} test episodes per cell." if episodes else "."))
     return lines or ["Scale unknown: the runs logged no config."]
+
+
+# The forms of a method a preset may also run, in the words the first page lists them with.
+FORMS = (("guarded", GUARDED), ("layer-at-test", LAYER_AT_TEST), ("safest", SAFEST))
+
+
+def _method(model: str) -> str:
+    """The method a form is of: 'proposed' for 'proposed_guarded_safest'."""
+    for _, table in FORMS:
+        if model in table:
+            return _method(table[model])
+    return model
+
+
+def models_phrase(models: list[str]) -> str:
+    """The models of a preset in few words: the methods by name and the forms of them it also ran by kind
+    ('Proposed, Min, Coordinate and their guarded and safest forms') rather than one label each; a form whose
+    method the preset did not run keeps its own label."""
+    grouped = [m for m in models if _method(m) != m and _method(m) in models]
+    named = [model_label(m, short=True) for m in models if m not in grouped]
+    kinds = [kind for kind, table in FORMS if any(m in table for m in grouped)]
+    if not kinds:
+        return ", ".join(named)
+    said = kinds[0] if len(kinds) == 1 else ", ".join(kinds[:-1]) + " and " + kinds[-1]
+    owners = list(dict.fromkeys(_method(m) for m in grouped))
+    whose = "their" if len(owners) > 1 else "its" if len(named) == 1 else f"{model_label(owners[0], short=True)}'s"
+    return f"{', '.join(named)} and {whose} {said} form{'' if len(grouped) == 1 else 's'}"
 
 
 def _episodes(evals: pd.DataFrame, models: list[str]) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -39,15 +40,20 @@ def per_scenario(evals: pd.DataFrame, model: str, metric: str,
     return out
 
 
-# Metrics that cannot be negative: a t interval that reaches below 0 is cut there (the true mean lies above
-# 0, so cutting cannot lose coverage; it only stops a table printing an impossible value).
-NON_NEGATIVE = ("avg_speed_kmh", "lane_changes", "overtakes", "collisions", "dangerous_actions", "distance_m")
+# The range a metric's mean lies in: counts, speeds and distances are never negative, and collisions per episode
+# is a share of episodes (an episode ends at the host's first collision), so it never passes 1. A t interval
+# reaching past its range is cut there: the true mean lies inside, so the cut loses no coverage; it only stops
+# a table printing an impossible value.
+RANGES = {"avg_speed_kmh": (0.0, math.inf), "lane_changes": (0.0, math.inf), "overtakes": (0.0, math.inf),
+          "collisions": (0.0, 1.0), "dangerous_actions": (0.0, math.inf), "distance_m": (0.0, math.inf)}
 
 
-def _floored(est: Estimate, metric: str) -> Estimate:
-    if metric in NON_NEGATIVE and est.has_ci and est.low < 0:
-        return Estimate(est.point, 0.0, max(est.high, 0.0), est.n)
-    return est
+def in_range(est: Estimate, metric: str) -> Estimate:
+    """`est` with its interval cut to the range `metric`'s mean can take (unchanged without a range or a CI)."""
+    if metric not in RANGES or not est.has_ci:
+        return est
+    bottom, top = RANGES[metric]
+    return Estimate(est.point, min(max(est.low, bottom), top), max(min(est.high, top), bottom), est.n)
 
 
 def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.DataFrame:
@@ -57,7 +63,7 @@ def summary(evals: pd.DataFrame, metrics: tuple[str, ...] = EVAL_METRICS) -> pd.
         for metric in metrics:
             if metric not in group:
                 continue
-            est = _floored(mean_ci(group[metric].to_numpy(dtype=float)), metric)
+            est = in_range(mean_ci(group[metric].to_numpy(dtype=float)), metric)
             rows.append({"model": model, "scenario": str(scenario), "metric": metric, "n_seeds": est.n,
                          "mean": est.point, "low": est.low, "high": est.high})
     return pd.DataFrame(rows, columns=["model", "scenario", "metric", "n_seeds", "mean", "low", "high"])
@@ -79,8 +85,8 @@ def headline(evals: pd.DataFrame, scenarios: list[str], scenario: str = HEADLINE
         row: dict[str, object] = {"model": model}
         for metric in metrics:
             by_scenario = per_scenario(evals, model, metric, scenarios)
-            for where, est in (("scenario", _floored(mean_ci(by_scenario.get(scenario, [])), metric)),
-                               ("mean", _floored(stratified_mean_ci(by_scenario), metric))):
+            for where, est in (("scenario", in_range(mean_ci(by_scenario.get(scenario, [])), metric)),
+                               ("mean", in_range(stratified_mean_ci(by_scenario), metric))):
                 for part in ("point", "low", "high", "n"):
                     row[f"{metric}/{where}/{part}"] = getattr(est, part)
         rows.append(row)

@@ -8,6 +8,7 @@ import pytest
 
 from analysis.stats import (
     DISTRIBUTIONS,
+    Estimate,
     coverage_text,
     difference_ci,
     measured_coverage,
@@ -16,6 +17,7 @@ from analysis.stats import (
     t_interval,
     welch_interval,
 )
+from analysis.tables import in_range, summary
 
 FLOOR = 0.93  # a nominal 95 % interval that covers less than this at five seeds is too narrow to decide on
 
@@ -82,3 +84,17 @@ def test_slope_difference_is_paired_by_seed() -> None:
     flat = {x: offsets * 0.5 for x in xs}
     est = slope_difference_ci(rising, flat)
     assert (est.point, est.low, est.high) == pytest.approx((40.0, 40.0, 40.0))
+
+
+def test_a_table_cuts_an_interval_to_the_range_its_mean_can_take() -> None:
+    """Collisions per episode is a share of episodes (an episode ends at its first crash): two seeds' t interval
+    reaches far past 0 and 1, the table prints [0, 1]; a return has no range and keeps its interval."""
+    evals = pd.DataFrame({"model": "proposed", "scenario": "3", "seed": [0, 1], "collisions": [0.21, 0.48],
+                          "episode_return": [143.2, 190.0]})
+    rows = summary(evals, ("collisions", "episode_return")).set_index("metric")
+    assert rows.loc["collisions", "mean"] == pytest.approx(0.345)
+    assert (rows.loc["collisions", "low"], rows.loc["collisions", "high"]) == (0.0, 1.0)
+    raw = t_interval(evals["episode_return"].to_numpy()[None, :])
+    assert float(raw[0][0]) < 0 and rows.loc["episode_return", "low"] == pytest.approx(float(raw[0][0]))
+    assert in_range(Estimate(0.5, 0.4, 0.6, 5), "collisions") == Estimate(0.5, 0.4, 0.6, 5)
+    assert in_range(Estimate(3.0, -1.0, 7.0, 2), "lane_changes") == Estimate(3.0, 0.0, 7.0, 2)

@@ -9,7 +9,7 @@ from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, ClaimResult
 from analysis.discussion import discussion
 from analysis.pipeline import _config_runs, _models_with_several_training_configs
 from analysis.report import claim_numbers
-from analysis.scale import is_smoke, scale_lines
+from analysis.scale import is_smoke, models_phrase, scale_lines
 
 SMOKE_CONFIG = """experiment: {name: smoke}
 learner: {total_steps: 256}
@@ -43,6 +43,24 @@ def test_scale_gives_each_preset_its_own_line_without_markup() -> None:
     assert lines[1].startswith("quick160 (Variant: enriched HGM): 160,000 training steps per seed")
     assert not any("`" in line for line in lines)
     assert len(scale_lines({"proposed": SMOKE_CONFIG, "human": human}, pd.DataFrame())) == 1
+
+
+def test_a_preset_names_its_methods_and_the_kinds_of_their_forms() -> None:
+    """The quick preset runs three methods in up to four forms each: page 1 names the methods and the kinds of
+    form, not fourteen labels, so that the scale lines fit the page."""
+    quick = ["proposed", "min", "coordinate", "proposed_guarded", "min_guarded", "coordinate_guarded",
+             "proposed_layer_at_test", "min_layer_at_test", "proposed_safest", "coordinate_guarded_safest"]
+    assert models_phrase(quick) == "Proposed, Min, Coordinate and their guarded, layer-at-test and safest forms"
+    assert models_phrase(["proposed", "proposed_safest"]) == "Proposed and its safest form"
+    assert models_phrase(["proposed", "min", "proposed_guarded", "proposed_guarded_safest"]) == \
+        "Proposed, Min and Proposed's guarded and safest forms"
+    # A form whose method the preset did not run keeps its label.
+    assert models_phrase(["proposed", "min_guarded"]) == "Proposed, Min (guarded)"
+    assert models_phrase(["proposed_guarded"]) == "Proposed (guarded)"
+    assert models_phrase(["proposed", "min", "my_variant"]) == "Proposed, Min, my_variant"
+    configs = {m: SMOKE_CONFIG for m in quick}
+    assert scale_lines(configs, pd.DataFrame())[0].startswith(
+        "smoke (Proposed, Min, Coordinate and their guarded, layer-at-test and safest forms): 256 training steps")
 
 
 def test_claims_are_listed_by_number_never_as_a_count() -> None:

@@ -152,22 +152,21 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     evals = with_cv_ratio(data.evals, data.runs)
     numbers = ladder.section(evals, data.curves, data.episodes)[1]
     lines = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))
-    steps = "; ".join(f"{name} {cell(evals, model, 'paper_steps', 'episode_return')} return and "
-                      f"{cell(evals, model, 'paper_steps', 'collisions')} collisions per episode (3 of 3 seeds), "
-                      f"{beats} of 3 beating the human-driven host"
+    steps = "; ".join(f"{name} {cell(evals, model, 'paper_steps', 'episode_return')} return, "
+                      f"{cell(evals, model, 'paper_steps', 'collisions')} collisions per episode (3 of 3 seeds; "
+                      f"{beats} of 3 beat the human-driven host)"
                       for name, model, beats in (("Proposed", "proposed", 3), ("Min", "min", 3),
                                                  ("Coordinate", "coordinate", 3)))
-    assert lines == [f"The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3, the scale-ladder "
-                     f"section: {steps}.",
-                     "The paper's pixels (160k steps, 84x84x4): not run yet (the scale-ladder section)."]
+    assert lines == [f"The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3 (scale ladder): {steps}.",
+                     "The paper's pixels (160k steps, 84x84x4): not run yet (scale ladder)."]
     # One seed of one method: its numbers stand alone, said once to have no interval.
     one = evals[(evals["experiment"] != "paper_steps") | ((evals["model"] == "proposed") & (evals["seed"] == 0))]
     numbers = ladder.section(one, data.curves, data.episodes)[1]
     row = numbers[(numbers["rung"] == "paper_steps") & (numbers["model"] == "proposed")].iloc[0]
     first = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))[0]
-    assert (f"Proposed {fmt(row['episode_return/point'], 'episode_return')} return and "
-            f"{fmt(row['collisions/point'], 'collisions')} collisions per episode (1 of 3 seeds, no CI), ") in first
-    assert "Min not run; Coordinate not run." in first and "[" not in first
+    assert (f"Proposed {fmt(row['episode_return/point'], 'episode_return')} return, "
+            f"{fmt(row['collisions/point'], 'collisions')} collisions per episode (1 of 3 seeds, no CI; ") in first
+    assert first.endswith("; Min and Coordinate not run.") and "[" not in first
     # Nothing above the shown presets has run: page 1 says nothing of the ladder.
     quick_only = evals[evals["experiment"] != "paper_steps"]
     assert ladder.page_one_lines(ladder.section(quick_only, data.curves, data.episodes)[1], {"quick", "quick160"},
@@ -189,8 +188,8 @@ def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None
     for where in (text, markdown):
         assert "Rung 3, paper_pixels: the paper's pixels (160k steps, 84x84x4): not run." in where
         # Page 1 (and results.md's scale) says what the rung above the main pages' found.
-        assert "The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3, the scale-ladder section: " \
-               "Proposed" in where
+        assert "The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3 (scale ladder): Proposed" \
+               in where
         assert "Rung 2, paper_steps: the paper's steps (1M steps, Table 4's learner, 36x36x2)." in where
     assert text.index("The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3") < text.index(
         "page 2")
