@@ -23,7 +23,15 @@ from analysis.labels import LEARNED, METRIC_LABELS, fmt, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
-from analysis.tables import HEADLINE_METRICS, HEADLINE_SCENARIO, SAFE_COLLISIONS, beating_grid, headline, seeds_beating
+from analysis.tables import (
+    HEADLINE_METRICS,
+    HEADLINE_SCENARIO,
+    SAFE_COLLISIONS,
+    beating_grid,
+    headline,
+    per_scenario,
+    seeds_beating,
+)
 
 TITLE = "Scale ladder"
 # The rungs, lowest first: each preset and what it keeps of the paper's scale (conf/experiment/*.yaml).
@@ -34,6 +42,9 @@ RUNGS = {
 }
 REFERENCE = "human"  # does not train: its runs stand beside every rung
 SCENARIOS = [HEADLINE_SCENARIO]  # the training traffic's mix
+# How a rung's host drives (mean over seeds, scenario 3): a return or a crash rate alone does not say whether the
+# host crawls, races into its leader or weaves.
+DRIVING = ("avg_speed_kmh", "lane_changes")
 NOT_RUN = "not run"
 
 
@@ -121,6 +132,9 @@ def method_rows(r: Rung) -> pd.DataFrame:
                 row[f"{metric}/{part}"] = value
         n = row[f"{HEADLINE_METRICS[0]}/n"]
         row["seeds"] = 0 if pd.isna(n) else int(n)
+        for metric in DRIVING:
+            row[metric] = float(per_scenario(r.evals, model, metric, SCENARIOS).get(HEADLINE_SCENARIO,
+                                                                                   pd.Series(dtype=float)).mean())
         row["paired_seeds"] = int(counts.loc[model, "seeds"]) if model in counts.index else 0
         row["beating"] = int(counts.loc[model, "beating"]) if model in counts.index else 0
         row["beating_text"] = _beating_text(model, row, words)
@@ -153,11 +167,14 @@ def _beating_text(model: str, row: dict[str, object], words: pd.Series) -> str:
 def _table(r: Rung) -> list[list[str]]:
     head = ["Method", "Seeds", f"Return, scenario {HEADLINE_SCENARIO}",
             f"{METRIC_LABELS['collisions']}, scenario {HEADLINE_SCENARIO}",
+            f"Speed (km/h), lane changes, scenario {HEADLINE_SCENARIO}",
             f"Seeds beating the human-driven host, scenario {HEADLINE_SCENARIO}", "CPU-hours per training (stops)"]
     rows = [head]
     for _, row in method_rows(r).iterrows():
         name = model_label(row["model"], short=True) + (" (every rung)" if row["model"] == REFERENCE else "")
-        rows.append([name, str(row["seeds"]), _cell(row, "episode_return"), _cell(row, "collisions"),
+        driving = (f"{fmt(row['avg_speed_kmh'], 'avg_speed_kmh')}, {fmt(row['lane_changes'], 'lane_changes')}"
+                   if row["seeds"] else NOT_RUN)
+        rows.append([name, str(row["seeds"]), _cell(row, "episode_return"), _cell(row, "collisions"), driving,
                      row["beating_text"], _hours(row)])
     return rows
 
@@ -345,7 +362,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "host does not train, so its runs (the same seeds in the same scenarios, hence the same test traffic) "
              "stand beside every rung. Only the paper's three methods are on the ladder: the variants (the "
              "enriched HGM, the guarded hosts) are left out. Return and collisions: per test episode in scenario "
-             f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds]. A "
+             f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds]; "
+             "speed and lane changes: the mean test speed and lane changes per episode there, mean over seeds. A "
              f"seed beats the human-driven host when its return is higher on the same seed and scenario with under "
              f"{SAFE_COLLISIONS:g} collisions per episode. CPU-hours per training: the mean over the method's "
              "trainings of the CPU time spent training (env steps over the rate logged per second of the training "
@@ -359,7 +377,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
             out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}. {progress_text(states[r.name])}")
             continue
         out.para(f"Rung {i}, {r.name}: {r.label}. {progress_text(states[r.name])}")
-        out.table(_table(r), widths=[1.4, 0.5, 1.3, 1.3, 1.5, 1.0])
+        out.table(_table(r), widths=[1.15, 0.55, 1.4, 1.4, 0.95, 1.25, 0.9])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
              "claims read the training curves of the networks the rung tested).")

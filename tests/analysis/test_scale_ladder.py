@@ -116,9 +116,13 @@ def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -
         for row, model in zip(table[1:4], LEARNED, strict=True):
             assert row[1:4] == [str(len(SEEDS)), cell(evals, model, experiment, "episode_return"),
                                 cell(evals, model, experiment, "collisions")]
+            # How it drives: the mean over seeds of each seed's scenario-3 speed and lane changes.
+            mine = evals[(evals["model"] == model) & (evals["experiment"] == experiment) & (evals["scenario"] == "3")]
+            per_seed = mine.groupby("seed")[["avg_speed_kmh", "lane_changes"]].mean().mean()
+            assert row[4] == f"{per_seed['avg_speed_kmh']:.1f}, {per_seed['lane_changes']:.2f}"
         # The human-driven host's runs stand beside every rung, and every seed is paired with them.
         assert table[4][2] == cell(evals, "human", "quick", "episode_return")
-        assert table[1][4].startswith(f"{len(SEEDS)} of {len(SEEDS)}")
+        assert table[1][5].startswith(f"{len(SEEDS)} of {len(SEEDS)}")
     assert "Variant" not in str(tables) and "enriched" not in "".join(r[0] for t in tables for r in t)
     assert any(p.startswith("Rung 3, paper_pixels: the paper's pixels (160k steps, 84x84x4): not run.")
                for p in paras)
