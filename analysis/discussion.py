@@ -8,6 +8,7 @@ import pandas as pd
 from scipy import stats as sps
 
 from analysis.claims import INCONCLUSIVE, NOT_SUPPORTED, SUPPORTED, TIE, ClaimResult, Comparison
+from analysis.labels import listed
 from analysis.tables import PAPER_TABLE6
 
 
@@ -43,8 +44,7 @@ def _tally(results: list[ClaimResult], verdict: str) -> str:
         return "none"
     words = ("no", "one", "two", "three", "four", "five", "six", "seven")
     count = words[len(nums)] if len(nums) < len(words) else str(len(nums))
-    listed = nums[0] if len(nums) == 1 else f"{', '.join(nums[:-1])} and {nums[-1]}"
-    return f"{count} claim{'s' if len(nums) > 1 else ''} ({listed})"
+    return f"{count} claim{'s' if len(nums) > 1 else ''} ({listed(nums)})"
 
 
 def seeds_to_decide(comparison: Comparison, most: int = 1000) -> int | None:
@@ -58,10 +58,6 @@ def seeds_to_decide(comparison: Comparison, most: int = 1000) -> int | None:
         if sps.t.ppf(0.975, n - 1) * spread / np.sqrt(n) < abs(e.point):
             return n
     return None
-
-
-def _listed(items: list[str]) -> str:
-    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
 
 
 def _what_would_change(result: ClaimResult) -> str:
@@ -91,7 +87,7 @@ def _what_would_change(result: ClaimResult) -> str:
                 f"seeds, and none goes the other way; {more}.")
     missing = [c for c in comps if c.verdict == INCONCLUSIVE]
     reasons = sorted({c.reason for c in missing})
-    return (f"{head} is undecided for want of data ({_listed(reasons) if reasons else 'no comparison possible'}): "
+    return (f"{head} is undecided for want of data ({listed(reasons) if reasons else 'no comparison possible'}): "
             "runs for the missing cells, with at least three seeds each, would decide it.")
 
 

@@ -86,6 +86,11 @@ def model_label(model: str, short: bool = False) -> str:
     return table.get(model, model)
 
 
+def listed(items: list[str]) -> str:
+    """'a', 'a and b', 'a, b and c': items as a sentence lists them."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
+
+
 def ordered_models(models: object) -> list[str]:
     """Known models in the paper's order first, then any user variant alphabetically."""
     present = {str(m) for m in pd.Series(list(models)).dropna().unique()}

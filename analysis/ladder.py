@@ -19,7 +19,7 @@ import pandas as pd
 
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
-from analysis.labels import LEARNED, METRIC_LABELS, fmt, model_label
+from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
@@ -315,10 +315,6 @@ def _method_words(row: pd.Series, expected: int) -> str:
             "host)")
 
 
-def _and(names: list[str]) -> str:
-    return names[0] if len(names) == 1 else ", ".join(names[:-1]) + " and " + names[-1]
-
-
 def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> list[str]:
     """What the rungs that the report's other pages do not show (`shown`: their presets) found so far, one line
     per rung, with `expected` seeds per method, for the report's first page beside the scale of its runs; none
@@ -336,7 +332,7 @@ def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> lis
         tested = [_method_words(row, expected) for _, row in rows.iterrows() if row["seeds"]]
         missing = [model_label(str(m), short=True) for m in rows.loc[rows["seeds"] == 0, "model"]]
         lines.append(f"{label}, scenario {HEADLINE_SCENARIO} (scale ladder): " + "; ".join(tested)
-                     + (f"; {_and(missing)} {NOT_RUN}" if missing else "") + ".")
+                     + (f"; {listed(missing)} {NOT_RUN}" if missing else "") + ".")
     return lines
 
 

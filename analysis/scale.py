@@ -11,7 +11,7 @@ from typing import Any
 import pandas as pd
 import yaml
 
-from analysis.labels import GUARDED, LAYER_AT_TEST, SAFEST, model_label, ordered_models
+from analysis.labels import GUARDED, LAYER_AT_TEST, SAFEST, listed, model_label, ordered_models
 
 PAPER_STEPS = 1_000_000
 SMOKE_PRESET = "smoke"
@@ -87,10 +87,9 @@ def models_phrase(models: list[str]) -> str:
     kinds = [kind for kind, table in FORMS if any(m in table for m in grouped)]
     if not kinds:
         return ", ".join(named)
-    said = kinds[0] if len(kinds) == 1 else ", ".join(kinds[:-1]) + " and " + kinds[-1]
     owners = list(dict.fromkeys(_method(m) for m in grouped))
     whose = "their" if len(owners) > 1 else "its" if len(named) == 1 else f"{model_label(owners[0], short=True)}'s"
-    return f"{', '.join(named)} and {whose} {said} form{'' if len(grouped) == 1 else 's'}"
+    return f"{', '.join(named)} and {whose} {listed(kinds)} form{'' if len(grouped) == 1 else 's'}"
 
 
 def _episodes(evals: pd.DataFrame, models: list[str]) -> str:
