@@ -131,6 +131,22 @@ class ReportWriter:
         self.pdf.set_font("DejaVu", size=10)
         self.space(1.5)
 
+    def bullets_height(self, items: Sequence[str], size: float) -> float:
+        """The height `bullets(items, size)` takes, without drawing it."""
+        self.pdf.set_font("DejaVu", size=size)
+        height = sum(self.pdf.multi_cell(self.width - 3, size * 0.5, f"- {item}", align="L", dry_run=True,
+                                         output="HEIGHT") for item in items)
+        self.pdf.set_font("DejaVu", size=10)
+        return height
+
+    def fitting_size(self, items: Sequence[str], size: float, smallest: float) -> float:
+        """The largest font size from `size` down to `smallest`, in half points, at which `items` fit in what is
+        left of the page; `smallest` where none does (they then run onto the next page)."""
+        left = self.pdf.h - self.pdf.b_margin - self.pdf.get_y()
+        while size > smallest and self.bullets_height(items, size) > left:
+            size -= 0.5
+        return max(size, smallest)
+
     def space(self, mm: float) -> None:
         self.pdf.ln(mm)
 
@@ -285,7 +301,9 @@ def _title_page(w: ReportWriter, inp: ReportInputs) -> None:
         w.para(inp.intervals, size=7.5, italic=True)
     # The heading says what the scale means, so that the lines under it fit the first page.
     w.heading("Scale of these runs: every number and verdict holds at this scale only", keep_mm=15)
-    w.bullets(inp.scale or ["Scale unknown."], size=7.5)
+    # Each rung of the scale ladder adds lines here: they shrink, to 6.5 pt at the least, before they leave page 1.
+    scale = inp.scale or ["Scale unknown."]
+    w.bullets(scale, size=w.fitting_size(scale, 7.5, smallest=6.5))
     w.space(2)
     info = [
         ["Generated", dt.datetime.now().strftime("%Y-%m-%d %H:%M")],
