@@ -5,8 +5,8 @@ Both settings say how a training runs, never what it learns (they stay outside t
 
 - the update's precision: bf16 autocast where the device computes bf16 natively (a CUDA GPU with
   bf16, a CPU with AVX512-BF16 or AMX). On this project's CPU it speeds the update up 1.2-1.4x
-  (`python -m hgm_repro.bench --only precision`), but its effect on learning is unchecked there, so
-  `auto` keeps float32 on CPUs and takes bf16 on CUDA; `bfloat16` asks for it on a CPU.
+  (`python -m hgm_repro.bench --only precision`), but on three tuning seeds it did not learn alike
+  (research/study.md), so `auto` keeps float32 on CPUs and takes bf16 on CUDA; `bfloat16` asks for it on a CPU.
 - overlapping collection with the update (`overlap.py`): on a CPU with at least two cores for this
   job. A joblib sweep gives each of its jobs `cores // n_jobs` (it sets OMP_NUM_THREADS in its
   workers), so two jobs at once on two cores each step and update in turn and never share a core.
