@@ -126,16 +126,18 @@ class ReportWriter:
         self.pdf.set_font("DejaVu", size=size)
         for item in items:
             self.pdf.set_x(self.pdf.l_margin + 3)
-            self.pdf.multi_cell(self.width - 3, size * 0.5, f"- {item}", align="L", new_x="LMARGIN",
-                                new_y="NEXT")
+            self._bullet(item, size, new_x="LMARGIN", new_y="NEXT")
         self.pdf.set_font("DejaVu", size=10)
         self.space(1.5)
+
+    def _bullet(self, item: str, size: float, **cell: object) -> object:
+        """One bullet as `bullets` sets it (indented 3 mm), drawn or, with dry_run, only measured."""
+        return self.pdf.multi_cell(self.width - 3, size * 0.5, f"- {item}", align="L", **cell)
 
     def bullets_height(self, items: Sequence[str], size: float) -> float:
         """The height `bullets(items, size)` takes, without drawing it."""
         self.pdf.set_font("DejaVu", size=size)
-        height = sum(self.pdf.multi_cell(self.width - 3, size * 0.5, f"- {item}", align="L", dry_run=True,
-                                         output="HEIGHT") for item in items)
+        height = sum(self._bullet(item, size, dry_run=True, output="HEIGHT") for item in items)
         self.pdf.set_font("DejaVu", size=10)
         return height
 
