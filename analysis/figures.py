@@ -38,7 +38,7 @@ TEST_METRICS = ("episode_return", "avg_speed_kmh", "lane_changes", "overtakes", 
                 "dangerous_actions")
 
 
-def _style() -> None:
+def use_style() -> None:
     # Sized for a 16 cm wide figure in an A4 report: 9-10 pt text stays readable when printed.
     sns.set_theme(context="paper", style="whitegrid", font_scale=1.15)
     plt.rcParams.update({"figure.dpi": 100, "savefig.dpi": 200, "axes.titleweight": "bold"})
@@ -110,7 +110,7 @@ def training_figure(curves: pd.DataFrame, evals: pd.DataFrame, stem: Path) -> di
     binned = bin_curves(curves, metric)
     if binned.empty:
         return None
-    _style()
+    use_style()
     models = ordered_models(binned["model"])
     paper = [m for m in models if m in LEARNED]
     variants = [m for m in models if m not in LEARNED]
@@ -135,7 +135,7 @@ def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
     data = evals[evals["scenario"].astype(str).isin(SCENARIOS) & ~evals["model"].isin(PROBES)]
     if data.empty:
         return None
-    _style()
+    use_style()
     cv = data["cv_ratio"] if "cv_ratio" in data else data["scenario"].astype(str).map(PAPER_CV_RATIO)
     data = data.assign(cv=cv)
     models = ordered_models(data["model"])

@@ -14,9 +14,11 @@ store down to that, so that the rungs of one model are never pooled as if they w
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import pandas as pd
 
+from analysis import ladder_figure
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
@@ -46,6 +48,7 @@ SCENARIOS = [HEADLINE_SCENARIO]  # the training traffic's mix
 # host crawls, races into its leader or weaves.
 DRIVING = ("avg_speed_kmh", "lane_changes")
 NOT_RUN = "not run"
+FIGURE = "fig_scale_ladder"
 
 
 @dataclasses.dataclass
@@ -344,10 +347,11 @@ def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
 
 
 def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
-            runs: pd.DataFrame | None = None, stopped: pd.DataFrame | None = None,
+            runs: pd.DataFrame | None = None, stopped: pd.DataFrame | None = None, out_dir: Path | None = None,
             ) -> tuple[Section, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
     """The ladder as a report section, with its numbers (rung x method), verdicts (claim x rung) and trainings
-    (rung x method x seed: tested, stopped or missing) as tables for CSV files."""
+    (rung x method x seed: tested, stopped or missing) as tables for CSV files; with `out_dir`, its figure
+    (`analysis.ladder_figure`) is saved there and leads the section."""
     ladder = rungs(evals, curves, episodes, runs)
     stopped = no_stopped() if stopped is None else stopped
     seeds = expected_seeds(evals)
@@ -368,6 +372,13 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "its wall time; the CPU time counts every thread of the process, so a CPU-hour is a core-hour whether "
              "the training ran on one core or, alone, on two); stops: how many times "
              "its trainings were stopped and resumed, each without its replay memory.")
+    numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
+    paths = ladder_figure.figure(ladder, numbers, REFERENCE, out_dir / FIGURE) if out_dir is not None else None
+    if paths is not None:
+        out.figure(paths["png"], f"Each rung's scenario-{HEADLINE_SCENARIO} return and collisions per episode, per "
+                                 "method: one dot per seed, the mean over seeds (diamond) and its 95 % t interval "
+                                 "(from two seeds); the human-driven host's mean and interval as the dashed line and "
+                                 "grey band. n: the seeds tested.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
             out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}. {progress_text(states[r.name])}")
@@ -376,11 +387,13 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
         out.table(_table(r), widths=[1.15, 0.55, 1.4, 1.4, 0.95, 1.25, 0.9])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
-             "claims read the training curves of the networks the rung tested).")
+             "claims read the training curves of the networks the rung tested). A claim made of several "
+             "comparisons reads not supported as soon as one of them is, even while another method's runs are "
+             "still missing (their comparisons could not make it hold); on a rung short of its seeds, more seeds "
+             "can still move any verdict.")
     out.table([["Claim", *[f"{r.name}" for r in ladder]],
                *[[f"{n}. {CLAIMS[n]}", *[str(verdicts.loc[n, r.name]) for r in ladder]] for n in verdicts.index]],
               widths=[3.4, *[1.0] * len(ladder)])
-    numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
     return out, numbers, verdicts.reset_index(), pd.concat(list(states.values()), ignore_index=True)
 
 

@@ -14,7 +14,7 @@ from analysis import crashes, equal_terms, ladder, safest, tables
 from analysis.claims import claims_table, evaluate_claims
 from analysis.curves import area_values, final_values, fluctuation_values
 from analysis.discussion import discussion
-from analysis.figures import TRAINING_FIGURES, make_figures
+from analysis.figures import FORMATS, TRAINING_FIGURES, make_figures
 from analysis.labels import LEARNED, PROBES, REFERENCE_HOSTS, SCENARIOS, fmt, model_label, ordered_models
 from analysis.load import EVAL_METRICS, StoreData, main_experiments
 from analysis.markdown import results_markdown
@@ -209,12 +209,15 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     out_dir.mkdir(parents=True, exist_ok=True)
     # The ladder reads every preset's runs; every other page one preset per model.
     ladder_section, ladder_numbers, ladder_verdicts, ladder_trainings = ladder.section(
-        with_cv_ratio(data.evals, data.runs), data.curves, data.episodes, data.runs, data.stopped)
+        with_cv_ratio(data.evals, data.runs), data.curves, data.episodes, data.runs, data.stopped, out_dir)
     ladder_lines = ladder.page_one_lines(ladder_numbers, set(main_experiments(data.evals).values()),
                                          len(ladder.expected_seeds(data.evals)))
     data = ladder.main_view(data)
     evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)
+    ladder_png = next((b.path for b in ladder_section.blocks if b.path is not None), None)
+    if ladder_png is not None:
+        figures["scale_ladder"] = {ext: ladder_png.with_suffix(f".{ext}") for ext in FORMATS}
     pictures_note = None
     if pictures:
         pics, pictures_note = scenario_pictures(list(SCENARIOS))

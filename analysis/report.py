@@ -122,6 +122,13 @@ class ReportWriter:
         self.pdf.set_font("DejaVu", size=10)
         self.space(1.5)
 
+    def para_height(self, text: str, size: float = 10) -> float:
+        """The height `para(text, size)` takes, without drawing it."""
+        self.pdf.set_font("DejaVu", size=size)
+        height = self.pdf.multi_cell(0, size * 0.5, text, dry_run=True, output="HEIGHT")
+        self.pdf.set_font("DejaVu", size=10)
+        return height + 1.5
+
     def bullets(self, items: Sequence[str], size: float = 9.5) -> None:
         self.pdf.set_font("DejaVu", size=size)
         for item in items:

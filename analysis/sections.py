@@ -7,6 +7,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+PARA_SIZE = 9.5  # pt
+TABLE_START_MM = 30  # a table's heading row (up to five lines at 8 pt) and its first row
+
 
 @dataclass
 class Block:
@@ -56,10 +59,13 @@ def markdown_lines(section: Section, out_dir: Path) -> list[str]:
 def write_pdf_section(w: Any, section: Section) -> None:
     """The section through the report's writer (`analysis.report.ReportWriter`)."""
     w.section(section.title)
-    for block in section.blocks:
+    for block, after in zip(section.blocks, [*section.blocks[1:], None], strict=True):
         if block.rows is not None:
             w.table(block.rows, col_widths=block.widths, size=8, align="LEFT")
         elif block.path is not None:
             w.image(block.path, caption=block.text)
         else:
-            w.para(block.text, size=9.5)
+            if after is not None and after.rows is not None:
+                # A paragraph that leads a table stays on the page of the table's heading and first rows.
+                w.keep(w.para_height(block.text, PARA_SIZE) + TABLE_START_MM)
+            w.para(block.text, size=PARA_SIZE)

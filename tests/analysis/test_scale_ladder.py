@@ -6,12 +6,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import pandas as pd
 import pytest
 
-from analysis import ladder
+from analysis import ladder, ladder_figure
 from analysis.bundle import MANIFEST, load_bundle, write_bundle
 from analysis.claims import SUPPORTED, evaluate_claims
+from analysis.figures import image_variance
 from analysis.labels import LEARNED, fmt
 from analysis.load import StoreData, load_store
 from analysis.pipeline import build_outputs
@@ -204,6 +206,50 @@ def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None
                                                                 "quick": True}
     # The main pages' claims read the quick runs only: claim 7 holds there as on the quick rung.
     assert pd.read_csv(ladder_report / "claims.csv")["verdict"].iloc[6] == SUPPORTED
+
+
+def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None:
+    data = two_rungs()
+    evals = with_cv_ratio(data.evals, data.runs)
+    # One seed of Min at the paper's steps: a mean with no interval, beside the rung's other methods.
+    evals = evals[(evals["experiment"] != "paper_steps") | (evals["model"] != "min") | (evals["seed"] == 1)]
+    rungs = ladder.rungs(evals, data.curves, data.episodes)
+    numbers = ladder.section(evals, data.curves, data.episodes)[1]
+    fig = ladder_figure.draw(rungs, numbers, ladder.REFERENCE)
+    try:
+        for ax, metric in zip(fig.axes, ladder_figure.METRICS, strict=True):
+            marks = {a.get_gid(): a for a in ax.get_children() if a.get_gid()}
+            drawn = set()
+            for _, row in numbers[numbers["model"].isin(LEARNED)].iterrows():
+                name = f"{row['rung']}/{row['model']}"
+                if not row["seeds"]:
+                    assert f"mean/{name}" not in marks  # a method not run draws nothing, not a zero
+                    continue
+                drawn.add(name)
+                assert marks[f"mean/{name}"].get_ydata()[0] == pytest.approx(row[f"{metric}/point"])
+                mine = evals[(evals["model"] == row["model"]) & (evals["experiment"] == row["rung"])
+                             & (evals["scenario"] == "3")]
+                seeds = mine.groupby("seed")[metric].mean().to_numpy(float)
+                assert sorted(marks[f"seeds/{name}"].get_offsets()[:, 1]) == pytest.approx(sorted(seeds))
+            assert drawn == {f"{e}/{m}" for e in ("quick", "paper_steps") for m in LEARNED}
+            human = numbers[numbers["model"] == ladder.REFERENCE].iloc[0]
+            assert marks[f"reference/{ladder.REFERENCE}"].get_ydata()[0] == pytest.approx(human[f"{metric}/point"])
+            assert [t.get_text() for t in ax.texts].count("not run") == len(LEARNED)  # the paper's pixels
+            assert "n=1" in [t.get_text() for t in ax.texts]  # Min at the paper's steps
+    finally:
+        plt.close(fig)
+    # No learned host's run on any rung: no figure.
+    human_only = evals[evals["model"] == ladder.REFERENCE]
+    assert ladder_figure.figure(ladder.rungs(human_only, data.curves, data.episodes), numbers, ladder.REFERENCE,
+                                Path("/nonexistent/fig")) is None
+
+
+def test_the_report_leads_the_ladder_with_its_figure(ladder_report: Path) -> None:
+    png = ladder_report / f"{ladder.FIGURE}.png"
+    assert png.exists() and image_variance(png) > 0
+    markdown = (ladder_report / "results.md").read_text()
+    ladder_part = markdown[markdown.index(f"## {ladder.TITLE}"):]
+    assert ladder_part.index(f"]({ladder.FIGURE}.png)") < ladder_part.index("Rung 1, quick")
 
 
 def test_training_hours_sum_the_logged_intervals_and_stops_come_from_the_resumes_tag() -> None:
