@@ -24,6 +24,8 @@ from analysis.tables import CLOSE_NOTE, HEADLINE_METRICS, HEADLINE_SCENARIO, SAF
 _FONT_DIR = Path(matplotlib.get_data_path()) / "fonts" / "ttf"
 SECTION_TITLES = ("Data used", "Environment and scenarios", "Average speed", "Lane changes", "Overtakes",
                   "Test results", "The paper's claims", "Discussion", "Appendix: configuration and commits")
+# The space after a paragraph or a bullet list, in mm (`para_height` counts it in).
+BLOCK_GAP_MM = 1.5
 VERDICT_COLOURS = {SUPPORTED: (46, 147, 60), NOT_SUPPORTED: (209, 73, 91), TIE: (90, 90, 90)}
 
 
@@ -120,14 +122,14 @@ class ReportWriter:
         self.pdf.set_font("DejaVu", "I" if italic else "", size)
         self.pdf.multi_cell(0, size * 0.5, text, new_x="LMARGIN", new_y="NEXT")
         self.pdf.set_font("DejaVu", size=10)
-        self.space(1.5)
+        self.space(BLOCK_GAP_MM)
 
     def para_height(self, text: str, size: float = 10) -> float:
         """The height `para(text, size)` takes, without drawing it."""
         self.pdf.set_font("DejaVu", size=size)
         height = self.pdf.multi_cell(0, size * 0.5, text, dry_run=True, output="HEIGHT")
         self.pdf.set_font("DejaVu", size=10)
-        return height + 1.5
+        return height + BLOCK_GAP_MM
 
     def bullets(self, items: Sequence[str], size: float = 9.5) -> None:
         self.pdf.set_font("DejaVu", size=size)
@@ -135,7 +137,7 @@ class ReportWriter:
             self.pdf.set_x(self.pdf.l_margin + 3)
             self._bullet(item, size, new_x="LMARGIN", new_y="NEXT")
         self.pdf.set_font("DejaVu", size=10)
-        self.space(1.5)
+        self.space(BLOCK_GAP_MM)
 
     def _bullet(self, item: str, size: float, **cell: object) -> object:
         """One bullet as `bullets` sets it (indented 3 mm), drawn or, with dry_run, only measured."""
