@@ -25,6 +25,7 @@ from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
+from analysis.stats import difference_ci
 from analysis.tables import (
     HEADLINE_METRICS,
     HEADLINE_SCENARIO,
@@ -49,6 +50,8 @@ SCENARIOS = [HEADLINE_SCENARIO]  # the training traffic's mix
 DRIVING = ("avg_speed_kmh", "lane_changes")
 NOT_RUN = "not run"
 FIGURE = "fig_scale_ladder"
+BASE = "quick"  # the lowest rung: each higher rung is read against it, seed by seed
+SHIFT_METRICS = (*HEADLINE_METRICS, *DRIVING)
 
 
 @dataclasses.dataclass
@@ -179,6 +182,45 @@ def _table(r: Rung) -> list[list[str]]:
                    if row["seeds"] else NOT_RUN)
         rows.append([name, str(row["seeds"]), _cell(row, "episode_return"), _cell(row, "collisions"), driving,
                      row["beating_text"], _hours(row)])
+    return rows
+
+
+def against_base(ladder: list[Rung]) -> pd.DataFrame:
+    """Per higher rung and learned method run on both it and the lowest rung: the rung's scenario-3 value minus
+    the lowest rung's, for each of `SHIFT_METRICS`, paired by seed over the seeds both tested (a seed draws the
+    same test traffic at every rung, so the pair differs in the preset alone). Columns: rung, model, metric,
+    point, low, high (the 95 % t interval of the per-seed differences) and n (the seeds paired)."""
+    columns = ["rung", "model", "metric", "point", "low", "high", "n"]
+    base = next((r for r in ladder if r.name == BASE), None)
+    out = []
+    for r in ladder:
+        if base is None or r.name == BASE or not r.ran:
+            continue
+        for model in LEARNED:
+            for metric in SHIFT_METRICS:
+                mine = per_scenario(r.evals, model, metric, SCENARIOS).get(HEADLINE_SCENARIO)
+                theirs = per_scenario(base.evals, model, metric, SCENARIOS).get(HEADLINE_SCENARIO)
+                if mine is None or theirs is None:
+                    continue
+                seeds = mine.index.intersection(theirs.index)
+                if seeds.empty:
+                    continue
+                est = difference_ci({HEADLINE_SCENARIO: mine[seeds]}, {HEADLINE_SCENARIO: theirs[seeds]})
+                out.append({"rung": r.name, "model": model, "metric": metric, "point": est.point, "low": est.low,
+                            "high": est.high, "n": est.n})
+    return pd.DataFrame(out, columns=columns)
+
+
+def _shift_table(shifts: pd.DataFrame) -> list[list[str]]:
+    head = ["Rung, method", "Seeds paired", *[f"{METRIC_LABELS[m]}" for m in SHIFT_METRICS]]
+    rows = [head]
+    for (name, model), group in shifts.groupby(["rung", "model"], sort=False):
+        cells = group.set_index("metric")
+        n = int(cells["n"].max())
+        rows.append([f"{name}, {model_label(str(model), short=True)}", str(n),
+                     *[fmt_estimate(cells.loc[m, "point"], cells.loc[m, "low"], cells.loc[m, "high"],
+                                    int(cells.loc[m, "n"]), m) if m in cells.index else "n/a"
+                       for m in SHIFT_METRICS]])
     return rows
 
 
@@ -348,10 +390,11 @@ def claim_verdicts(ladder: list[Rung]) -> pd.DataFrame:
 
 def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
             runs: pd.DataFrame | None = None, stopped: pd.DataFrame | None = None, out_dir: Path | None = None,
-            ) -> tuple[Section, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
-    """The ladder as a report section, with its numbers (rung x method), verdicts (claim x rung) and trainings
-    (rung x method x seed: tested, stopped or missing) as tables for CSV files; with `out_dir`, its figure
-    (`analysis.ladder_figure`) is saved there and leads the section."""
+            ) -> tuple[Section, pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame]:
+    """The ladder as a report section, with its numbers (rung x method), verdicts (claim x rung), trainings
+    (rung x method x seed: tested, stopped or missing) and shifts (`against_base`: each higher rung minus the
+    lowest, paired by seed) as tables for CSV files; with `out_dir`, its figure (`analysis.ladder_figure`) is
+    saved there and leads the section."""
     ladder = rungs(evals, curves, episodes, runs)
     stopped = no_stopped() if stopped is None else stopped
     seeds = expected_seeds(evals)
@@ -385,6 +428,14 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
             continue
         out.para(f"Rung {i}, {r.name}: {r.label}. {progress_text(states[r.name])}")
         out.table(_table(r), widths=[1.15, 0.55, 1.4, 1.4, 0.95, 1.25, 0.9])
+    shifts = against_base(ladder)
+    if not shifts.empty:
+        out.para(f"What each higher rung changes against the {BASE} rung, method by method: the rung's scenario-"
+                 f"{HEADLINE_SCENARIO} value minus the {BASE} rung's, paired by seed over the seeds both tested (a "
+                 "seed draws the same test traffic at every rung, so a pair differs in the preset alone), mean "
+                 "[95 % t interval of the per-seed differences]. An interval that holds 0 says the rung has not "
+                 "shown a change on these seeds.")
+        out.table(_shift_table(shifts), widths=[1.5, 0.7, *[1.2] * len(SHIFT_METRICS)])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
              "claims read the training curves of the networks the rung tested). A claim made of several "
@@ -394,7 +445,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
     out.table([["Claim", *[f"{r.name}" for r in ladder]],
                *[[f"{n}. {CLAIMS[n]}", *[str(verdicts.loc[n, r.name]) for r in ladder]] for n in verdicts.index]],
               widths=[3.4, *[1.0] * len(ladder)])
-    return out, numbers, verdicts.reset_index(), pd.concat(list(states.values()), ignore_index=True)
+    return out, numbers, verdicts.reset_index(), pd.concat(list(states.values()), ignore_index=True), shifts
 
 
 def main_view(data: StoreData) -> StoreData:

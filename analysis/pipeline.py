@@ -208,7 +208,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     """Everything `python -m analysis` writes, from one loaded store."""
     out_dir.mkdir(parents=True, exist_ok=True)
     # The ladder reads every preset's runs; every other page one preset per model.
-    ladder_section, ladder_numbers, ladder_verdicts, ladder_trainings = ladder.section(
+    ladder_section, ladder_numbers, ladder_verdicts, ladder_trainings, ladder_shifts = ladder.section(
         with_cv_ratio(data.evals, data.runs), data.curves, data.episodes, data.runs, data.stopped, out_dir)
     ladder_lines = ladder.page_one_lines(ladder_numbers, set(main_experiments(data.evals).values()),
                                          len(ladder.expected_seeds(data.evals)))
@@ -257,7 +257,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     if not crash_table.empty:
         csvs.append(out_dir / "crash_anatomy.csv")
     for name, frame in (("scale_ladder.csv", ladder_numbers), ("scale_ladder_claims.csv", ladder_verdicts),
-                        ("scale_ladder_trainings.csv", ladder_trainings)):
+                        ("scale_ladder_trainings.csv", ladder_trainings), ("scale_ladder_shifts.csv", ladder_shifts)):
         frame.to_csv(out_dir / name, index=False, float_format="%.6g")
         csvs.append(out_dir / name)
     sections = [s for s in (ladder_section, equal_terms.section(evals, data.curves, results), crash_section,

@@ -124,7 +124,7 @@ def rung_data() -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, pd.DataFrame]
 def test_the_ladder_says_what_is_tested_stopped_and_missing_and_the_hours_left() -> None:
     evals, curves, episodes, stopped = rung_data()
     evals = with_cv_ratio(evals, pd.DataFrame())
-    section, _, _, states = ladder.section(evals, curves, episodes, None, stopped)
+    section, _, _, states, _ = ladder.section(evals, curves, episodes, None, stopped)
     paras = [b.text for b in section.blocks if b.rows is None]
     step_rows = states[states["rung"] == "paper_steps"].set_index(["model", "seed"])
     assert list(step_rows["state"]) == ["tested", "stopped", "missing"] + ["missing"] * 6

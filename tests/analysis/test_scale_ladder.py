@@ -109,10 +109,10 @@ def cell(evals: pd.DataFrame, model: str, experiment: str, metric: str) -> str:
 def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -> None:
     data = two_rungs()
     evals = with_cv_ratio(data.evals, data.runs)
-    section, numbers, verdicts, _ = ladder.section(evals, data.curves, data.episodes)
+    section, numbers, verdicts, _, _ = ladder.section(evals, data.curves, data.episodes)
     tables = [b.rows for b in section.blocks if b.rows is not None]
     paras = [b.text for b in section.blocks if b.rows is None]
-    quick, steps, claims = tables
+    quick, steps, _shifts, claims = tables
     assert [row[0] for row in quick[1:]] == ["Proposed", "Min", "Coordinate", "Human (every rung)"]
     for table, experiment in ((quick, "quick"), (steps, "paper_steps")):
         for row, model in zip(table[1:4], LEARNED, strict=True):
@@ -263,3 +263,36 @@ def test_training_hours_sum_the_logged_intervals_and_stops_come_from_the_resumes
     assert costs.loc["a", "hours"] == pytest.approx(60 / 3600) and costs.loc["b", "hours"] == pytest.approx(1.0)
     assert (costs.loc["a", "stops"], costs.loc["b", "stops"]) == (2, 0)
     assert ladder.training_costs(curves[curves["metric"] == "loss"]).empty
+
+
+def test_a_higher_rung_is_read_against_the_quick_one_seed_by_seed() -> None:
+    data = two_rungs()
+    evals = with_cv_ratio(data.evals, data.runs)
+    # The steps rung's proposed host lacks seed 2: it pairs only the seeds both rungs tested.
+    gone = (evals["model"] == "proposed") & (evals["experiment"] == "paper_steps") & (evals["seed"] == 2)
+    evals = evals[~gone]
+    section, _, _, _, shifts = ladder.section(evals, data.curves, data.episodes)
+    assert set(shifts["rung"]) == {"paper_steps"}  # the quick rung is the base; the pixels rung did not run
+    assert set(shifts["model"]) == set(LEARNED)
+    assert set(shifts["metric"]) == set(ladder.SHIFT_METRICS)
+
+    def scenario3(model: str, experiment: str, metric: str) -> pd.Series:
+        rows = evals[(evals["model"] == model) & (evals["experiment"] == experiment) & (evals["scenario"] == "3")]
+        return rows.groupby("seed")[metric].mean()
+
+    for _, row in shifts.iterrows():
+        high = scenario3(row["model"], "paper_steps", row["metric"])
+        low = scenario3(row["model"], "quick", row["metric"])
+        differences = (high - low.reindex(high.index)).to_numpy()
+        expected = mean_ci(differences)
+        assert row["n"] == (2 if row["model"] == "proposed" else 3) == len(differences)
+        assert row["point"] == pytest.approx(expected.point)
+        assert (row["low"], row["high"]) == pytest.approx((expected.low, expected.high))
+    coordinate = shifts[(shifts["model"] == "coordinate") & (shifts["metric"] == "episode_return")].iloc[0]
+    assert coordinate["low"] > 0  # the steps rung's Coordinate scores far above its quick twin (two_rungs)
+    rows = [b.rows for b in section.blocks if b.rows and b.rows[0][0] == "Rung, method"]
+    assert len(rows) == 1 and [r[0] for r in rows[0][1:]] == ["paper_steps, Proposed", "paper_steps, Min",
+                                                              "paper_steps, Coordinate"]
+    assert rows[0][1][1] == "2"
+    assert rows[0][3][2] == fmt_estimate(coordinate["point"], coordinate["low"], coordinate["high"], 3,
+                                         "episode_return")
