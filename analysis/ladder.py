@@ -435,7 +435,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
                  "seed draws the same test traffic at every rung, so a pair differs in the preset alone), mean "
                  "[95 % t interval of the per-seed differences]. An interval that holds 0 says the rung has not "
                  "shown a change on these seeds.")
-        out.table(_shift_table(shifts), widths=[1.5, 0.7, *[1.2] * len(SHIFT_METRICS)])
+        out.table(_shift_table(shifts), widths=[1.55, 0.55, 1.4, 1.4, 1.15, 1.15])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
              "claims read the training curves of the networks the rung tested). A claim made of several "
