@@ -434,7 +434,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
                  f"{HEADLINE_SCENARIO} value minus the {BASE} rung's, paired by seed over the seeds both tested (a "
                  "seed draws the same test traffic at every rung, so a pair differs in the preset alone), mean "
                  "[95 % t interval of the per-seed differences]. An interval that holds 0 says the rung has not "
-                 "shown a change on these seeds.")
+                 "shown a change on these seeds. The interval's coverage is measured at 5 seeds; with fewer seeds "
+                 "paired it is a guide, not a verdict.")
         out.table(_shift_table(shifts), widths=[1.55, 0.55, 1.4, 1.4, 1.15, 1.15])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "
