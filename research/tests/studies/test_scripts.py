@@ -97,3 +97,25 @@ def training_statuses(state: Path) -> list[tuple[str]]:
 def running(state: Path) -> list[tuple[str]]:
     with sqlite3.connect(state / "mlflow.db") as db:
         return db.execute("SELECT name FROM runs WHERE status = 'RUNNING'").fetchall()
+
+
+@pytest.mark.parametrize(("files_mb", "commits"), [
+    ({"a": 9, "b": 9, "c": 9, "d": 9, "e": 9, "f": 9}, True),  # 54 MB in all, no file near git's limit
+    ({"a": 2, "b": 60}, False),  # one paper-sized network
+])
+def test_the_kept_state_is_refused_for_its_largest_file_not_its_total(tmp_path, files_mb, commits):
+    store = tmp_path / "runs" / "paper_steps"
+    for training, mb in files_mb.items():
+        (store / "checkpoints" / training).mkdir(parents=True)
+        with open(store / "checkpoints" / training / "last.pt", "wb") as f:
+            f.write(bytes(mb * 1024 * 1024))  # written, not sparse: the disk holds what a push carries
+    sqlite3.connect(store / "mlflow.db").close()
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    done = run("ladder.sh", "paper_steps", "keep", env=env, timeout=120)
+    assert done.returncode == 0, done.stderr
+    if commits:
+        assert "to carry the rung to the next session" in done.stdout
+        assert "too large to commit" not in done.stderr
+    else:
+        assert "trainings/b/last.pt is 60 MB, more than LADDER_MAX_FILE_MB=50: too large to commit" in done.stderr
+        assert "to carry the rung to the next session" not in done.stdout
