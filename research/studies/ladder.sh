@@ -128,10 +128,13 @@ if [ -n "${LADDER_NICE:-}" ]; then
       echo "ladder.sh: could not lower the sweep's priority (no /proc/$sweep/autogroup); it runs at full share" >&2
   fi
 fi
-(sleep $((minutes * 60)) && kill -TERM -- "-$sweep" 2>/dev/null) &
+(sleep $((minutes * 60)) && kill -TERM -- "-$sweep") 2>/dev/null &
 timer=$!
 status=0
 wait "$sweep" || status=$?
+# A sweep that ends first stops its timer: the sleep first (killing only the subshell would orphan it for the
+# rest of MINUTES), which ends the subshell before its kill.
+pkill -P "$timer" 2>/dev/null || true
 kill "$timer" 2>/dev/null || true
 # The sweep's parent exits at once, but its joblib workers go on to write last.pt and mark their runs KILLED,
 # and then idle on, orphaned: keep nothing until the group has used no CPU for 15 s, then end what is left.

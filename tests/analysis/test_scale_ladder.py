@@ -9,10 +9,11 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import pandas as pd
 import pytest
+from matplotlib.collections import LineCollection
 
 from analysis import ladder, ladder_figure
 from analysis.bundle import MANIFEST, load_bundle, write_bundle
-from analysis.claims import SUPPORTED, evaluate_claims
+from analysis.claims import MIN_SEEDS, SUPPORTED, evaluate_claims
 from analysis.figures import image_variance
 from analysis.labels import LEARNED, fmt
 from analysis.load import StoreData, load_store
@@ -211,8 +212,11 @@ def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None
 def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None:
     data = two_rungs()
     evals = with_cv_ratio(data.evals, data.runs)
-    # One seed of Min at the paper's steps: a mean with no interval, beside the rung's other methods.
-    evals = evals[(evals["experiment"] != "paper_steps") | (evals["model"] != "min") | (evals["seed"] == 1)]
+    # At the paper's steps, one seed of Min and two of Coordinate: below MIN_SEEDS, seeds and a mean with no
+    # interval (a t interval on one degree of freedom would flatten the axis), beside proposed's three.
+    steps = evals["experiment"] == "paper_steps"
+    evals = evals[~steps | ((evals["model"] != "min") | (evals["seed"] == 1))
+                  & ((evals["model"] != "coordinate") | (evals["seed"] < 2))]
     rungs = ladder.rungs(evals, data.curves, data.episodes)
     numbers = ladder.section(evals, data.curves, data.episodes)[1]
     fig = ladder_figure.draw(rungs, numbers, ladder.REFERENCE)
@@ -231,11 +235,18 @@ def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None
                              & (evals["scenario"] == "3")]
                 seeds = mine.groupby("seed")[metric].mean().to_numpy(float)
                 assert sorted(marks[f"seeds/{name}"].get_offsets()[:, 1]) == pytest.approx(sorted(seeds))
+                assert (f"interval/{name}" in marks) == (len(seeds) >= MIN_SEEDS), name
+                if len(seeds) >= MIN_SEEDS:  # the bar spans the table's interval
+                    (bar,) = [a for a in ax.get_children()
+                              if a.get_gid() == f"interval/{name}" and isinstance(a, LineCollection)]
+                    (segment,) = bar.get_segments()
+                    assert sorted(segment[:, 1]) == pytest.approx([row[f"{metric}/low"], row[f"{metric}/high"]])
             assert drawn == {f"{e}/{m}" for e in ("quick", "paper_steps") for m in LEARNED}
             human = numbers[numbers["model"] == ladder.REFERENCE].iloc[0]
             assert marks[f"reference/{ladder.REFERENCE}"].get_ydata()[0] == pytest.approx(human[f"{metric}/point"])
             assert [t.get_text() for t in ax.texts].count("not run") == len(LEARNED)  # the paper's pixels
-            assert "n=1" in [t.get_text() for t in ax.texts]  # Min at the paper's steps
+            counts = [t.get_text() for t in ax.texts]
+            assert "n=1" in counts and "n=2" in counts  # Min and Coordinate at the paper's steps
     finally:
         plt.close(fig)
     # No learned host's run on any rung: no figure.

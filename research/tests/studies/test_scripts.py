@@ -29,6 +29,18 @@ def test_the_ladder_refuses_a_bad_rung_or_time(args, said):
     assert done.returncode == 2 and said in done.stderr
 
 
+def test_a_sweep_that_ends_before_its_time_leaves_no_timer_behind(tmp_path):
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    timer = ["pgrep", "-fx", "sleep 5820"]  # 97 minutes: a number nothing else here sleeps
+    try:
+        done = run("ladder.sh", "paper_steps", "97", "model=nosuch", env=env, timeout=180)
+        assert done.returncode == 0 and "the sweep ended with status 2 " in done.stdout, done.stderr  # refused
+        assert done.stderr == ""  # nor a word from the stopped timer
+        assert subprocess.run(timer, capture_output=True).returncode == 1  # no sleep outlives the sweep
+    finally:
+        subprocess.run(["pkill", "-fx", "sleep 5820"], capture_output=True)
+
+
 def test_the_retest_names_the_models_it_knows():
     done = run("retest_grid.sh", "proposed", "nosuch")
     assert done.returncode == 2 and "model 'nosuch' has no config; allowed:" in done.stderr
