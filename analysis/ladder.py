@@ -19,7 +19,7 @@ from pathlib import Path
 import pandas as pd
 
 from analysis import ladder_figure
-from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
+from analysis.claims import CLAIMS, MIN_SEEDS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
@@ -420,8 +420,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
     if paths is not None:
         out.figure(paths["png"], f"Each rung's scenario-{HEADLINE_SCENARIO} return and collisions per episode, per "
                                  "method: one dot per seed, the mean over seeds (diamond) and its 95 % t interval "
-                                 "(from two seeds); the human-driven host's mean and interval as the dashed line and "
-                                 "grey band. n: the seeds tested.")
+                                 f"(from {MIN_SEEDS} seeds, the count a claim's verdict needs); the human-driven "
+                                 "host's mean and interval as the dashed line and grey band. n: the seeds tested.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
             out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}. {progress_text(states[r.name])}")

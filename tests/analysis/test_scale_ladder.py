@@ -261,6 +261,7 @@ def test_the_report_leads_the_ladder_with_its_figure(ladder_report: Path) -> Non
     markdown = (ladder_report / "results.md").read_text()
     ladder_part = markdown[markdown.index(f"## {ladder.TITLE}"):]
     assert ladder_part.index(f"]({ladder.FIGURE}.png)") < ladder_part.index("Rung 1, quick")
+    assert f"its 95 % t interval (from {MIN_SEEDS} seeds" in ladder_part  # as the figure draws it
 
 
 def test_training_hours_sum_the_logged_intervals_and_stops_come_from_the_resumes_tag() -> None:
