@@ -125,9 +125,11 @@ def test_the_readme_gives_each_claim_the_reports_verdict():
     assert said == dict(zip(claims["claim"].astype(int), claims["verdict"], strict=True))
 
 
-# The README's scale-ladder table: each row's label begins with its rung (the human-driven host: the quick rung's).
-LADDER_ROWS = {"quick": ("quick", "proposed"), "the paper's steps": ("paper_steps", "proposed"),
-               "the paper's pixels": ("paper_pixels", "proposed"), "human-driven host": ("quick", "human")}
+# The README's scale-ladder table: each row's label begins with its method and rung (the human-driven host: the
+# quick rung's).
+LADDER_ROWS = {"proposed, quick": ("quick", "proposed"), "proposed, the paper's steps": ("paper_steps", "proposed"),
+               "proposed, the paper's pixels": ("paper_pixels", "proposed"), "Min, quick": ("quick", "min"),
+               "Min, the paper's pixels": ("paper_pixels", "min"), "human-driven host": ("quick", "human")}
 LADDER_CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?)(?: \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\])?$")
 
 
