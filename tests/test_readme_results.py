@@ -129,7 +129,8 @@ def test_the_readme_gives_each_claim_the_reports_verdict():
 # quick rung's).
 LADDER_ROWS = {"proposed, quick": ("quick", "proposed"), "proposed, the paper's steps": ("paper_steps", "proposed"),
                "proposed, the paper's pixels": ("paper_pixels", "proposed"), "Min, quick": ("quick", "min"),
-               "Min, the paper's pixels": ("paper_pixels", "min"), "human-driven host": ("quick", "human")}
+               "Min, the paper's steps": ("paper_steps", "min"), "Min, the paper's pixels": ("paper_pixels", "min"),
+               "human-driven host": ("quick", "human")}
 LADDER_CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?)(?: \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\])?$")
 
 
