@@ -19,13 +19,13 @@ from pathlib import Path
 import pandas as pd
 
 from analysis import ladder_figure
-from analysis.claims import CLAIMS, MIN_SEEDS, ClaimResult, evaluate_claims
+from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
-from analysis.stats import difference_ci
+from analysis.stats import COVERAGE_SEEDS, difference_ci
 from analysis.tables import (
     HEADLINE_METRICS,
     HEADLINE_SCENARIO,
@@ -153,11 +153,19 @@ def method_rows(r: Rung) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
+def estimate(point: float, low: float, high: float, n: int, metric: str) -> str:
+    """'mean [low, high]' from `COVERAGE_SEEDS` seeds, the count at which the t interval's coverage is measured;
+    below it the mean alone (the tables say how many seeds), as a t interval on fewer seeds claims a coverage no
+    one has measured; 'n/a' with none."""
+    if n >= COVERAGE_SEEDS:
+        return fmt_estimate(point, low, high, n, metric)
+    return fmt(point, metric) if n else "n/a"
+
+
 def _cell(row: pd.Series, metric: str) -> str:
     if not row["seeds"]:
         return NOT_RUN
-    return fmt_estimate(row[f"{metric}/point"], row[f"{metric}/low"], row[f"{metric}/high"], int(row["seeds"]),
-                        metric)
+    return estimate(row[f"{metric}/point"], row[f"{metric}/low"], row[f"{metric}/high"], int(row["seeds"]), metric)
 
 
 def _beating_text(model: str, row: dict[str, object], words: pd.Series) -> str:
@@ -218,8 +226,8 @@ def _shift_table(shifts: pd.DataFrame) -> list[list[str]]:
         cells = group.set_index("metric")
         n = int(cells["n"].max())
         rows.append([f"{name}, {model_label(str(model), short=True)}", str(n),
-                     *[fmt_estimate(cells.loc[m, "point"], cells.loc[m, "low"], cells.loc[m, "high"],
-                                    int(cells.loc[m, "n"]), m) if m in cells.index else "n/a"
+                     *[estimate(cells.loc[m, "point"], cells.loc[m, "low"], cells.loc[m, "high"],
+                                int(cells.loc[m, "n"]), m) if m in cells.index else "n/a"
                        for m in SHIFT_METRICS]])
     return rows
 
@@ -348,16 +356,16 @@ def progress_text(states: pd.DataFrame) -> str:
 
 
 def _method_words(row: pd.Series, expected: int) -> str:
-    """'Proposed 80.3 return, 0.640 collisions per episode (1 of 5 seeds, no CI; 0 of 1 beat the human-driven
-    host)' for a method with tests on the rung."""
+    """'Proposed 80.3 return, 0.640 collisions per episode (2 of 5 seeds, no CI; 0 of 2 beat the human-driven
+    host)' for a method with tests on the rung: an interval from `COVERAGE_SEEDS` seeds only (`estimate`)."""
     n = int(row["seeds"])
-    # The seeds are said once, after both numbers: a single seed's number stands alone.
-    return_, collisions = (fmt_estimate(row[f"{m}/point"], row[f"{m}/low"], row[f"{m}/high"], n, m) if n > 1
-                           else fmt(row[f"{m}/point"], m) for m in HEADLINE_METRICS)
+    # The seeds are said once, after both numbers.
+    return_, collisions = (estimate(row[f"{m}/point"], row[f"{m}/low"], row[f"{m}/high"], n, m)
+                           for m in HEADLINE_METRICS)
     seeds = f"{n} of {expected} seeds" if expected else f"{n} seeds"
     return (f"{model_label(str(row['model']), short=True)} {return_} return, {collisions} collisions per episode "
-            f"({seeds}{', no CI' if n < 2 else ''}; {row['beating']} of {row['paired_seeds']} beat the human-driven "
-            "host)")
+            f"({seeds}{', no CI' if n < COVERAGE_SEEDS else ''}; {row['beating']} of {row['paired_seeds']} beat the "
+            "human-driven host)")
 
 
 def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> list[str]:
@@ -405,7 +413,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "host does not train, so its runs (the same seeds in the same scenarios, hence the same test traffic) "
              "stand beside every rung. Only the paper's three methods are on the ladder: the variants (the "
              "enriched HGM, the guarded hosts) are left out. Return and collisions: per test episode in scenario "
-             f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds]; "
+             f"{HEADLINE_SCENARIO} (the training traffic's mix), mean over seeds [95 % t interval over seeds, shown "
+             f"from {COVERAGE_SEEDS} seeds, the count at which its coverage is measured: below it, the mean alone]; "
              "speed and lane changes: the mean test speed and lane changes per episode there, mean over seeds. A "
              f"seed beats the human-driven host when its return is higher on the same seed and scenario with under "
              f"{SAFE_COLLISIONS:g} collisions per episode. CPU-hours per training: the mean over the method's "
@@ -420,7 +429,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
     if paths is not None:
         out.figure(paths["png"], f"Each rung's scenario-{HEADLINE_SCENARIO} return and collisions per episode, per "
                                  "method: one dot per seed, the mean over seeds (diamond) and its 95 % t interval "
-                                 f"(from {MIN_SEEDS} seeds, the count a claim's verdict needs); the human-driven "
+                                 f"(from {COVERAGE_SEEDS} seeds, as in the tables); the human-driven "
                                  "host's mean and interval as the dashed line and grey band. n: the seeds tested.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
@@ -433,9 +442,10 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
         out.para(f"What each higher rung changes against the {BASE} rung, method by method: the rung's scenario-"
                  f"{HEADLINE_SCENARIO} value minus the {BASE} rung's, paired by seed over the seeds both tested (a "
                  "seed draws the same test traffic at every rung, so a pair differs in the preset alone), mean "
-                 "[95 % t interval of the per-seed differences]. An interval that holds 0 says the rung has not "
-                 "shown a change on these seeds. The interval's coverage is measured at 5 seeds; with fewer seeds "
-                 "paired it is a guide, not a verdict.")
+                 "[95 % t interval of the per-seed differences, shown from "
+                 f"{COVERAGE_SEEDS} seeds paired, the count at which its coverage is measured]. An interval that "
+                 "holds 0 says the rung has not shown a change on these seeds; with fewer seeds paired, the mean "
+                 "alone is a guide, not a verdict.")
         out.table(_shift_table(shifts), widths=[1.55, 0.55, 1.4, 1.4, 1.15, 1.15])
     verdicts = claim_verdicts(ladder)
     out.para("Each claim's verdict on each rung's runs alone, by the rule of the claims section (training "

@@ -1,9 +1,10 @@
 """The scale ladder as a picture: how each method's scenario-3 return and collisions move from rung to rung.
 
 One panel per metric, the rungs along x (lowest first), each method a column of its seeds' values (one dot per
-seed) with the mean over seeds and, from `MIN_SEEDS` seeds on, its 95 % t interval: the numbers of the ladder's
-tables (`method_rows`). Below that count the claims give no verdict, and a t interval on one degree of freedom is
-wide enough to flatten every other column on the axis, so the seeds and their mean stand alone. The
+seed) with the mean over seeds and, from `COVERAGE_SEEDS` seeds on, its 95 % t interval: the numbers of the ladder's
+tables (`method_rows`). Below that count the interval's coverage is not measured (the tables print no interval
+either), and a t interval on one degree of freedom is wide enough to flatten every other column on the axis, so
+the seeds and their mean stand alone. The
 human-driven host does not train: its mean and interval are a grey band across every rung. A rung or method not
 run yet is left empty and says so, so that a gap is never read as a zero.
 """
@@ -17,9 +18,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from analysis.claims import MIN_SEEDS
 from analysis.figures import save, use_style
 from analysis.labels import LEARNED, METRIC_LABELS, PALETTE, model_label
+from analysis.stats import COVERAGE_SEEDS
 from analysis.tables import HEADLINE_SCENARIO, per_scenario
 
 if TYPE_CHECKING:
@@ -46,8 +47,8 @@ def figure(rungs: list[Rung], numbers: pd.DataFrame, reference: str, stem: Path)
 
 def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str) -> plt.Figure:
     """The ladder figure, not saved: per panel, each method's mean is a line with a diamond marker (`gid`
-    `mean/RUNG/MODEL`), its seeds a scatter (`gid` `seeds/RUNG/MODEL`) and, from `MIN_SEEDS` seeds, its interval
-    an error bar (`gid` `interval/RUNG/MODEL`)."""
+    `mean/RUNG/MODEL`), its seeds a scatter (`gid` `seeds/RUNG/MODEL`) and, from `COVERAGE_SEEDS` seeds, its
+    interval an error bar (`gid` `interval/RUNG/MODEL`)."""
     use_style()
     fig, axes = plt.subplots(1, len(METRICS), figsize=(10.0, 4.2))
     rng = np.random.default_rng(0)  # the dots' sideways jitter only, so that equal values stay apart
@@ -75,7 +76,7 @@ def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str) -> plt.Figure
                                color=PALETTE[model], alpha=0.45, linewidths=0, zorder=2,
                                gid=f"seeds/{r.name}/{model}")
                 point, low, high = (row[f"{metric}/{p}"] for p in ("point", "low", "high"))
-                if row["seeds"] >= MIN_SEEDS and np.isfinite(low):
+                if row["seeds"] >= COVERAGE_SEEDS and np.isfinite(low):
                     bar = ax.errorbar(at, point, yerr=[[point - low], [high - point]], fmt="none",
                                       ecolor=PALETTE[model], elinewidth=1.6, capsize=4, zorder=3)
                     for part in bar.get_children():
@@ -97,7 +98,7 @@ def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str) -> plt.Figure
                               label=f"{model_label(reference)} (does not train: every rung)"))
     fig.legend(handles=handles, loc="lower center", ncol=len(handles), frameon=False, fontsize=8,
                bbox_to_anchor=(0.5, -0.03))
-    fig.suptitle(f"How the answer moves with scale: seeds (dots), mean and, from {MIN_SEEDS} seeds, 95 % t interval",
-                 fontweight="bold", fontsize=11)
+    fig.suptitle(f"How the answer moves with scale: seeds (dots), mean and, from {COVERAGE_SEEDS} seeds, "
+                 "95 % t interval", fontweight="bold", fontsize=11)
     fig.tight_layout(rect=(0, 0.05, 1, 1))
     return fig

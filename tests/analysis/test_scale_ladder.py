@@ -13,18 +13,18 @@ from matplotlib.collections import LineCollection
 
 from analysis import ladder, ladder_figure
 from analysis.bundle import MANIFEST, load_bundle, write_bundle
-from analysis.claims import MIN_SEEDS, SUPPORTED, evaluate_claims
+from analysis.claims import SUPPORTED, evaluate_claims
 from analysis.figures import image_variance
 from analysis.labels import LEARNED, fmt
 from analysis.load import StoreData, load_store
 from analysis.pipeline import build_outputs
 from analysis.report import fmt_estimate
 from analysis.scenarios import with_cv_ratio
-from analysis.stats import mean_ci
+from analysis.stats import COVERAGE_SEEDS, mean_ci
 from analysis.synthetic import SyntheticSpec, synthetic_frames, write_store
 from tests.helpers import pdf_text
 
-SEEDS = (0, 1, 2)
+SEEDS = (0, 1, 2, 3, 4)  # COVERAGE_SEEDS: the tables show intervals
 
 
 def frames(experiment: str, models: tuple[str, ...], **effects: dict[str, float]) -> tuple[pd.DataFrame, ...]:
@@ -102,9 +102,10 @@ def test_a_store_keeps_each_presets_runs_of_one_model(tmp_path: Path) -> None:
 
 
 def cell(evals: pd.DataFrame, model: str, experiment: str, metric: str) -> str:
+    """The scenario-3 mean over seeds, with its t interval from the seed count whose coverage is measured only."""
     rows = evals[(evals["model"] == model) & (evals["experiment"] == experiment) & (evals["scenario"] == "3")]
-    e = mean_ci(rows[metric].to_numpy(float))
-    return fmt_estimate(e.point, e.low, e.high, e.n, metric)
+    e = mean_ci(rows.groupby("seed")[metric].mean().to_numpy(float))
+    return fmt_estimate(e.point, e.low, e.high, e.n, metric) if e.n >= COVERAGE_SEEDS else fmt(e.point, metric)
 
 
 def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -> None:
@@ -130,7 +131,7 @@ def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -
     assert any(p.startswith("Rung 3, paper_pixels: the paper's pixels (160k steps, 84x84x4): not run.")
                for p in paras)
     assert any(p.startswith("Rung 2, paper_steps: the paper's steps (1M steps, Table 4's learner, 36x36x2). "
-                            "Trainings: Proposed: seeds 0, 1 and 2 tested.") for p in paras)
+                            "Trainings: Proposed: seeds 0, 1, 2, 3 and 4 tested.") for p in paras)
     # Each rung's verdicts are evaluate_claims on that rung's runs alone.
     for name in ("quick", "paper_steps"):
         rung = ladder.rung(evals, data.curves, data.episodes, name)
@@ -151,7 +152,7 @@ def test_the_other_pages_read_one_preset_per_model(tmp_path: Path) -> None:
         (m, "quick") for m in (*LEARNED, "human")} | {("proposed_enriched", "quick160")}
     assert set(main.curves["train_key"]) == {f"tk-{m}-quick" for m in LEARNED}  # not the paper_steps trainings
     assert set(main.episodes["run_id"]) == set(main.evals["run_id"])
-    assert any("paper_steps (15 evaluation runs) are read by the scale-ladder page only" in n for n in main.dropped)
+    assert any("paper_steps (25 evaluation runs) are read by the scale-ladder page only" in n for n in main.dropped)
 
 
 def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> None:
@@ -160,10 +161,10 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     numbers = ladder.section(evals, data.curves, data.episodes)[1]
     lines = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))
     steps = "; ".join(f"{name} {cell(evals, model, 'paper_steps', 'episode_return')} return, "
-                      f"{cell(evals, model, 'paper_steps', 'collisions')} collisions per episode (3 of 3 seeds; "
-                      f"{beats} of 3 beat the human-driven host)"
-                      for name, model, beats in (("Proposed", "proposed", 3), ("Min", "min", 3),
-                                                 ("Coordinate", "coordinate", 3)))
+                      f"{cell(evals, model, 'paper_steps', 'collisions')} collisions per episode (5 of 5 seeds; "
+                      f"{beats} of 5 beat the human-driven host)"
+                      for name, model, beats in (("Proposed", "proposed", 5), ("Min", "min", 5),
+                                                 ("Coordinate", "coordinate", 5)))
     assert lines == [f"The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3 (scale ladder): {steps}.",
                      "The paper's pixels (160k steps, 84x84x4): not run yet (scale ladder)."]
     # One seed of one method: its numbers stand alone, said once to have no interval.
@@ -172,8 +173,15 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     row = numbers[(numbers["rung"] == "paper_steps") & (numbers["model"] == "proposed")].iloc[0]
     first = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))[0]
     assert (f"Proposed {fmt(row['episode_return/point'], 'episode_return')} return, "
-            f"{fmt(row['collisions/point'], 'collisions')} collisions per episode (1 of 3 seeds, no CI; ") in first
+            f"{fmt(row['collisions/point'], 'collisions')} collisions per episode (1 of 5 seeds, no CI; ") in first
     assert first.endswith("; Min and Coordinate not run.") and "[" not in first
+    # Three seeds of each (enough for a claim's verdict, short of the count whose coverage is measured): the
+    # means alone, each said to have no interval.
+    three = evals[(evals["experiment"] != "paper_steps") | (evals["seed"] < 3)]
+    numbers = ladder.section(three, data.curves, data.episodes)[1]
+    line = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))[0]
+    assert "[" not in line and line.count("(3 of 5 seeds, no CI; ") == len(LEARNED)
+    assert f"Min {cell(three, 'min', 'paper_steps', 'episode_return')} return" in line
     # Nothing above the shown presets has run: page 1 says nothing of the ladder.
     quick_only = evals[evals["experiment"] != "paper_steps"]
     assert ladder.page_one_lines(ladder.section(quick_only, data.curves, data.episodes)[1], {"quick", "quick160"},
@@ -212,13 +220,19 @@ def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None
 def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None:
     data = two_rungs()
     evals = with_cv_ratio(data.evals, data.runs)
-    # At the paper's steps, one seed of Min and two of Coordinate: below MIN_SEEDS, seeds and a mean with no
-    # interval (a t interval on one degree of freedom would flatten the axis), beside proposed's three.
+    # At the paper's steps, one seed of Min and four of Coordinate: below COVERAGE_SEEDS, seeds and a mean with
+    # no interval (as in the tables; four seeds are enough for a claim's verdict, yet their interval's coverage is
+    # not measured), beside proposed's five.
     steps = evals["experiment"] == "paper_steps"
     evals = evals[~steps | ((evals["model"] != "min") | (evals["seed"] == 1))
-                  & ((evals["model"] != "coordinate") | (evals["seed"] < 2))]
+                  & ((evals["model"] != "coordinate") | (evals["seed"] < 4))]
     rungs = ladder.rungs(evals, data.curves, data.episodes)
-    numbers = ladder.section(evals, data.curves, data.episodes)[1]
+    section, numbers = ladder.section(evals, data.curves, data.episodes)[:2]
+    # The steps rung's table prints the same: Min's and Coordinate's means alone, proposed's with its interval.
+    steps_table = [b.rows for b in section.blocks if b.rows is not None][1]
+    for row, model in zip(steps_table[1:4], LEARNED, strict=True):
+        assert row[2:4] == [cell(evals, model, "paper_steps", m) for m in ("episode_return", "collisions")]
+        assert ("[" in row[2]) == (model == "proposed"), row
     fig = ladder_figure.draw(rungs, numbers, ladder.REFERENCE)
     try:
         for ax, metric in zip(fig.axes, ladder_figure.METRICS, strict=True):
@@ -235,8 +249,8 @@ def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None
                              & (evals["scenario"] == "3")]
                 seeds = mine.groupby("seed")[metric].mean().to_numpy(float)
                 assert sorted(marks[f"seeds/{name}"].get_offsets()[:, 1]) == pytest.approx(sorted(seeds))
-                assert (f"interval/{name}" in marks) == (len(seeds) >= MIN_SEEDS), name
-                if len(seeds) >= MIN_SEEDS:  # the bar spans the table's interval
+                assert (f"interval/{name}" in marks) == (len(seeds) >= COVERAGE_SEEDS), name
+                if len(seeds) >= COVERAGE_SEEDS:  # the bar spans the table's interval
                     (bar,) = [a for a in ax.get_children()
                               if a.get_gid() == f"interval/{name}" and isinstance(a, LineCollection)]
                     (segment,) = bar.get_segments()
@@ -246,7 +260,7 @@ def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None
             assert marks[f"reference/{ladder.REFERENCE}"].get_ydata()[0] == pytest.approx(human[f"{metric}/point"])
             assert [t.get_text() for t in ax.texts].count("not run") == len(LEARNED)  # the paper's pixels
             counts = [t.get_text() for t in ax.texts]
-            assert "n=1" in counts and "n=2" in counts  # Min and Coordinate at the paper's steps
+            assert "n=1" in counts and "n=4" in counts  # Min and Coordinate at the paper's steps
     finally:
         plt.close(fig)
     # No learned host's run on any rung: no figure.
@@ -261,7 +275,7 @@ def test_the_report_leads_the_ladder_with_its_figure(ladder_report: Path) -> Non
     markdown = (ladder_report / "results.md").read_text()
     ladder_part = markdown[markdown.index(f"## {ladder.TITLE}"):]
     assert ladder_part.index(f"]({ladder.FIGURE}.png)") < ladder_part.index("Rung 1, quick")
-    assert f"its 95 % t interval (from {MIN_SEEDS} seeds" in ladder_part  # as the figure draws it
+    assert f"its 95 % t interval (from {COVERAGE_SEEDS} seeds" in ladder_part  # as the figure draws it
 
 
 def test_training_hours_sum_the_logged_intervals_and_stops_come_from_the_resumes_tag() -> None:
@@ -297,7 +311,7 @@ def test_a_higher_rung_is_read_against_the_quick_one_seed_by_seed() -> None:
         low = scenario3(row["model"], "quick", row["metric"])
         differences = (high - low.reindex(high.index)).to_numpy()
         expected = mean_ci(differences)
-        assert row["n"] == (2 if row["model"] == "proposed" else 3) == len(differences)
+        assert row["n"] == (4 if row["model"] == "proposed" else 5) == len(differences)
         assert row["point"] == pytest.approx(expected.point)
         assert (row["low"], row["high"]) == pytest.approx((expected.low, expected.high))
     coordinate = shifts[(shifts["model"] == "coordinate") & (shifts["metric"] == "episode_return")].iloc[0]
@@ -305,6 +319,9 @@ def test_a_higher_rung_is_read_against_the_quick_one_seed_by_seed() -> None:
     rows = [b.rows for b in section.blocks if b.rows and b.rows[0][0] == "Rung, method"]
     assert len(rows) == 1 and [r[0] for r in rows[0][1:]] == ["paper_steps, Proposed", "paper_steps, Min",
                                                               "paper_steps, Coordinate"]
-    assert rows[0][1][1] == "2"
-    assert rows[0][3][2] == fmt_estimate(coordinate["point"], coordinate["low"], coordinate["high"], 3,
+    assert rows[0][1][1] == "4"
+    assert rows[0][3][2] == fmt_estimate(coordinate["point"], coordinate["low"], coordinate["high"], 5,
                                          "episode_return")
+    # Four seeds paired: each shift's mean alone, as its interval's coverage is measured at five.
+    proposed = shifts[shifts["model"] == "proposed"].set_index("metric")
+    assert rows[0][1][2:] == [fmt(proposed.loc[m, "point"], m) for m in ladder.SHIFT_METRICS]
