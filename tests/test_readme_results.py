@@ -130,7 +130,9 @@ def test_the_readme_gives_each_claim_the_reports_verdict():
 LADDER_ROWS = {"proposed, quick": ("quick", "proposed"), "proposed, the paper's steps": ("paper_steps", "proposed"),
                "proposed, the paper's pixels": ("paper_pixels", "proposed"), "Min, quick": ("quick", "min"),
                "Min, the paper's steps": ("paper_steps", "min"), "Min, the paper's pixels": ("paper_pixels", "min"),
-               "Coordinate, quick": ("quick", "coordinate"), "human-driven host": ("quick", "human")}
+               "Coordinate, quick": ("quick", "coordinate"),
+               "Coordinate, the paper's pixels": ("paper_pixels", "coordinate"),
+               "human-driven host": ("quick", "human")}
 LADDER_CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?)(?: \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\])?$")
 
 
