@@ -31,7 +31,7 @@ MODEL_ORDER = ("proposed", "min", "coordinate", "proposed_enriched", *GUARDED, *
 MODEL_LABELS = {
     "proposed": "Proposed (HGM + camera)",
     "min": "Min (camera only)",
-    "coordinate": "Coordinate (V2X vector)",
+    "coordinate": "Coordinate (V2X vector + camera)",
     "proposed_enriched": "Variant: proposed with the enriched HGM (not the paper's)",
     "proposed_guarded": "Guarded: proposed under the safety layer (not the paper's)",
     "min_guarded": "Guarded: Min under the safety layer (not the paper's)",

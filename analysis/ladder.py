@@ -425,7 +425,9 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "the training ran on one core or, alone, on two); stops: how many times "
              "its trainings were stopped and resumed, each without its replay memory.")
     numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
-    paths = ladder_figure.figure(ladder, numbers, REFERENCE, out_dir / FIGURE) if out_dir is not None else None
+    under_way = {(name, model) for name, s in states.items() for model in s.loc[s["state"] == STOPPED, "model"]}
+    paths = (ladder_figure.figure(ladder, numbers, REFERENCE, out_dir / FIGURE, under_way)
+             if out_dir is not None else None)
     if paths is not None:
         out.figure(paths["png"], f"Each rung's scenario-{HEADLINE_SCENARIO} return and collisions per episode, per "
                                  "method: one dot per seed, the mean over seeds (diamond) and its 95 % t interval "

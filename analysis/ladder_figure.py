@@ -36,19 +36,22 @@ def _tick(name: str, label: str) -> str:
     return f"{name}\n" + inside.replace(", ", "\n", 1)
 
 
-def figure(rungs: list[Rung], numbers: pd.DataFrame, reference: str, stem: Path) -> dict[str, Path] | None:
+def figure(rungs: list[Rung], numbers: pd.DataFrame, reference: str, stem: Path,
+           under_way: set[tuple[str, str]] | frozenset[tuple[str, str]] = frozenset()) -> dict[str, Path] | None:
     """`rungs` (`analysis.ladder.Rung`, lowest first) and their `numbers` (`method_rows` of each, with `rung`;
-    `reference` the host that does not train): the ladder figure saved under `stem`, or None while no rung has a
-    learned host's run."""
+    `reference` the host that does not train; `under_way` the (rung, model) pairs with a stopped training): the
+    ladder figure saved under `stem`, or None while no rung has a learned host's run."""
     if not any(r.ran for r in rungs):
         return None
-    return save(draw(rungs, numbers, reference), stem)
+    return save(draw(rungs, numbers, reference, under_way), stem)
 
 
-def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str) -> plt.Figure:
+def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str,
+         under_way: set[tuple[str, str]] | frozenset[tuple[str, str]] = frozenset()) -> plt.Figure:
     """The ladder figure, not saved: per panel, each method's mean is a line with a diamond marker (`gid`
     `mean/RUNG/MODEL`), its seeds a scatter (`gid` `seeds/RUNG/MODEL`) and, from `COVERAGE_SEEDS` seeds, its
-    interval an error bar (`gid` `interval/RUNG/MODEL`)."""
+    interval an error bar (`gid` `interval/RUNG/MODEL`). A method with no seed tested on a rung is marked
+    "under way" where one of its trainings there was stopped part-way (`under_way`), else "not run"."""
     use_style()
     fig, axes = plt.subplots(1, len(METRICS), figsize=(10.0, 4.2))
     rng = np.random.default_rng(0)  # the dots' sideways jitter only, so that equal values stay apart
@@ -67,7 +70,8 @@ def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str) -> plt.Figure
                 at = x + (k - (len(LEARNED) - 1) / 2) * WIDTH
                 row = rows.loc[model] if model in rows.index else None
                 if row is None or not row["seeds"]:
-                    ax.text(at, 0.02, "not run", rotation=90, ha="center", va="bottom", fontsize=7, color="0.45",
+                    mark = "under way" if (r.name, model) in under_way else "not run"
+                    ax.text(at, 0.02, mark, rotation=90, ha="center", va="bottom", fontsize=7, color="0.45",
                             transform=ax.get_xaxis_transform())
                     continue
                 seeds = per_scenario(r.evals, model, metric, [HEADLINE_SCENARIO]).get(HEADLINE_SCENARIO)

@@ -7,12 +7,13 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import pandas as pd
 import pytest
 from mlflow import MlflowClient
 from mlflow.entities import Metric, Param
 
-from analysis import ladder
+from analysis import ladder, ladder_figure
 from analysis.bundle import MANIFEST, load_bundle, write_bundle
 from analysis.combine import combine
 from analysis.costs import hours_trained, last_rate
@@ -168,3 +169,22 @@ def test_cpu_hours_come_from_the_cpu_rate_where_logged_and_the_wall_rate_elsewhe
     assert hours_trained(curves).to_dict() == pytest.approx({"old": 1.0, "new": (100 + 50) / 3600})
     assert hours_trained(curves, cpu=False).to_dict() == pytest.approx({"old": 1.0, "new": (200 + 50) / 3600})
     assert last_rate(curves).to_dict() == {"old": 1.0, "new": 20.0}
+
+
+def test_a_method_whose_only_training_is_stopped_reads_under_way_in_the_figure(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    evals, curves, episodes, stopped = rung_data()
+    stopped = stopped.assign(model="min")  # Min's seed 1 stopped at the paper's steps, none of its seeds tested
+    evals = with_cv_ratio(evals, pd.DataFrame())
+    drawn, draw = [], ladder_figure.draw
+
+    def keep_marks(*args: object, **kwargs: object) -> plt.Figure:
+        fig = draw(*args, **kwargs)
+        drawn.append([[t.get_text() for t in ax.texts if t.get_text() in ("under way", "not run")] for ax in fig.axes])
+        return fig
+
+    monkeypatch.setattr(ladder_figure, "draw", keep_marks)
+    ladder.section(evals, curves, episodes, None, stopped, out_dir=tmp_path)
+    (panels,) = drawn
+    for marks in panels:  # the steps rung: Min under way, Coordinate not run; the pixels rung: all three not run
+        assert marks.count("under way") == 1 and marks.count("not run") == 1 + len(LEARNED)

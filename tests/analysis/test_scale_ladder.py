@@ -263,6 +263,15 @@ def test_the_ladder_figure_draws_each_rungs_seeds_and_the_tables_means() -> None
             assert "n=1" in counts and "n=4" in counts  # Min and Coordinate at the paper's steps
     finally:
         plt.close(fig)
+    # A training stopped part-way on a rung where its method has no seed tested yet reads "under way", not
+    # "not run"; the other methods there still read "not run".
+    fig = ladder_figure.draw(rungs, numbers, ladder.REFERENCE, under_way={("paper_pixels", "coordinate")})
+    try:
+        for ax in fig.axes:
+            marks = [t.get_text() for t in ax.texts]
+            assert marks.count("under way") == 1 and marks.count("not run") == len(LEARNED) - 1
+    finally:
+        plt.close(fig)
     # No learned host's run on any rung: no figure.
     human_only = evals[evals["model"] == ladder.REFERENCE]
     assert ladder_figure.figure(ladder.rungs(human_only, data.curves, data.episodes), numbers, ladder.REFERENCE,
