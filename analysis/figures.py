@@ -123,7 +123,7 @@ def training_figure(curves: pd.DataFrame, evals: pd.DataFrame, stem: Path) -> di
         _curve_panel(ax, binned, group, evals, eval_metric)
         ax.set_title(title if len(panels) > 1 else "", fontsize=10)
         ax.set_ylabel(METRIC_LABELS.get(metric, metric))
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.17), ncol=1 if len(panels) > 1 else 2,
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=1 if len(panels) > 1 else 2,
                   frameon=False, fontsize=8)
     fig.suptitle(f"{METRIC_LABELS.get(metric, metric)} during training (cf. paper {paper_fig})", fontweight="bold")
     fig.tight_layout()
@@ -155,10 +155,11 @@ def test_figure(evals: pd.DataFrame, stem: Path) -> dict[str, Path] | None:
         ax.set_ylabel("")
     handles = [plt.Line2D([], [], color=PALETTE.get(m, "black"), marker="o", label=model_label(m))
                for m in models]
-    fig.legend(handles=handles, loc="lower center", ncol=min(len(models), 3), frameon=False,
-               bbox_to_anchor=(0.5, -0.06))
+    columns = min(len(models), 3)
+    fig.legend(handles=handles, loc="lower center", ncol=columns, frameon=False, bbox_to_anchor=(0.5, 0.0))
     fig.suptitle("Test results per scenario: mean over seeds, 95 % t interval over seeds", fontweight="bold")
-    fig.tight_layout(rect=(0, 0.04, 1, 1))
+    # The panels end above the legend's rows, so that the lowest x labels stay clear of it however many hosts.
+    fig.tight_layout(rect=(0, 0.01 + 0.036 * -(-len(models) // columns), 1, 1))
     return save(fig, stem)
 
 
