@@ -368,10 +368,18 @@ def _method_words(row: pd.Series, expected: int) -> str:
             "human-driven host)")
 
 
-def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> list[str]:
+def under_way(trainings: pd.DataFrame) -> set[tuple[str, str]]:
+    """The (rung, model) pairs with a training stopped part-way, from `section`'s trainings table."""
+    going = trainings[trainings["state"] == STOPPED]
+    return set(zip(going["rung"], going["model"], strict=True))
+
+
+def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int,
+                   going: set[tuple[str, str]] | frozenset[tuple[str, str]] = frozenset()) -> list[str]:
     """What the rungs that the report's other pages do not show (`shown`: their presets) found so far, one line
     per rung, with `expected` seeds per method, for the report's first page beside the scale of its runs; none
-    while no such rung has run."""
+    while no such rung has run. A method with no seed tested reads "under way" where `going` (`under_way`) holds
+    its rung, else "not run"."""
     above = numbers[~numbers["rung"].isin(shown) & numbers["model"].isin(LEARNED)]
     if not above["seeds"].gt(0).any():
         return []
@@ -383,8 +391,11 @@ def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int) -> lis
             lines.append(f"{label}: {NOT_RUN} yet (scale ladder).")
             continue
         tested = [_method_words(row, expected) for _, row in rows.iterrows() if row["seeds"]]
-        missing = [model_label(str(m), short=True) for m in rows.loc[rows["seeds"] == 0, "model"]]
+        untested = [str(m) for m in rows.loc[rows["seeds"] == 0, "model"]]
+        started = [model_label(m, short=True) for m in untested if (name, m) in going]
+        missing = [model_label(m, short=True) for m in untested if (name, m) not in going]
         lines.append(f"{label}, scenario {HEADLINE_SCENARIO} (scale ladder): " + "; ".join(tested)
+                     + (f"; {listed(started)} under way, no seed tested yet" if started else "")
                      + (f"; {listed(missing)} {NOT_RUN}" if missing else "") + ".")
     return lines
 
@@ -425,8 +436,8 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "the training ran on one core or, alone, on two); stops: how many times "
              "its trainings were stopped and resumed, each without its replay memory.")
     numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
-    under_way = {(name, model) for name, s in states.items() for model in s.loc[s["state"] == STOPPED, "model"]}
-    paths = (ladder_figure.figure(ladder, numbers, REFERENCE, out_dir / FIGURE, under_way)
+    going = {(name, model) for name, s in states.items() for model in s.loc[s["state"] == STOPPED, "model"]}
+    paths = (ladder_figure.figure(ladder, numbers, REFERENCE, out_dir / FIGURE, going)
              if out_dir is not None else None)
     if paths is not None:
         out.figure(paths["png"], f"Each rung's scenario-{HEADLINE_SCENARIO} return and collisions per episode, per "

@@ -211,7 +211,7 @@ def build_outputs(data: StoreData, out_dir: Path, pictures: bool = True) -> Outp
     ladder_section, ladder_numbers, ladder_verdicts, ladder_trainings, ladder_shifts = ladder.section(
         with_cv_ratio(data.evals, data.runs), data.curves, data.episodes, data.runs, data.stopped, out_dir)
     ladder_lines = ladder.page_one_lines(ladder_numbers, set(main_experiments(data.evals).values()),
-                                         len(ladder.expected_seeds(data.evals)))
+                                         len(ladder.expected_seeds(data.evals)), ladder.under_way(ladder_trainings))
     data = ladder.main_view(data)
     evals = with_cv_ratio(data.evals, data.runs)  # each scenario placed by the mix its runs logged
     figures = make_figures(data.curves, evals, out_dir)

@@ -129,6 +129,7 @@ def test_the_ladder_says_what_is_tested_stopped_and_missing_and_the_hours_left()
     paras = [b.text for b in section.blocks if b.rows is None]
     step_rows = states[states["rung"] == "paper_steps"].set_index(["model", "seed"])
     assert list(step_rows["state"]) == ["tested", "stopped", "missing"] + ["missing"] * 6
+    assert ladder.under_way(states) == {("paper_steps", "proposed")}
     steps_keys = set(evals.loc[evals["experiment"] == "paper_steps", "train_key"])
     tested_hours = ladder.training_costs(curves[curves["train_key"].isin(steps_keys)])["hours"].iloc[0]
     assert step_rows.loc[("proposed", 0), "hours"] == pytest.approx(tested_hours)

@@ -175,6 +175,9 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     assert (f"Proposed {fmt(row['episode_return/point'], 'episode_return')} return, "
             f"{fmt(row['collisions/point'], 'collisions')} collisions per episode (1 of 5 seeds, no CI; ") in first
     assert first.endswith("; Min and Coordinate not run.") and "[" not in first
+    # A method whose training was stopped part-way, none of its seeds tested, is under way, not "not run".
+    going = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS), {("paper_steps", "min")})[0]
+    assert going.endswith("; Min under way, no seed tested yet; Coordinate not run.")
     # Three seeds of each (enough for a claim's verdict, short of the count whose coverage is measured): the
     # means alone, each said to have no interval.
     three = evals[(evals["experiment"] != "paper_steps") | (evals["seed"] < 3)]
