@@ -436,7 +436,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
              "the training ran on one core or, alone, on two); stops: how many times "
              "its trainings were stopped and resumed, each without its replay memory.")
     numbers = pd.concat([method_rows(r).assign(label=r.label, ran=r.ran) for r in ladder], ignore_index=True)
-    going = {(name, model) for name, s in states.items() for model in s.loc[s["state"] == STOPPED, "model"]}
+    going = under_way(pd.concat(states.values(), ignore_index=True))
     paths = (ladder_figure.figure(ladder, numbers, REFERENCE, out_dir / FIGURE, going)
              if out_dir is not None else None)
     if paths is not None:
