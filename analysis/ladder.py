@@ -22,6 +22,7 @@ from analysis import ladder_figure
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
+from analysis.ladder_figure import NOT_RUN, UNDER_WAY
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section
@@ -48,7 +49,6 @@ SCENARIOS = [HEADLINE_SCENARIO]  # the training traffic's mix
 # How a rung's host drives (mean over seeds, scenario 3): a return or a crash rate alone does not say whether the
 # host crawls, races into its leader or weaves.
 DRIVING = ("avg_speed_kmh", "lane_changes")
-NOT_RUN = "not run"
 FIGURE = "fig_scale_ladder"
 BASE = "quick"  # the lowest rung: each higher rung is read against it, seed by seed
 SHIFT_METRICS = (*HEADLINE_METRICS, *DRIVING)
@@ -162,9 +162,9 @@ def estimate(point: float, low: float, high: float, n: int, metric: str) -> str:
     return fmt(point, metric) if n else "n/a"
 
 
-def _cell(row: pd.Series, metric: str) -> str:
+def _cell(row: pd.Series, metric: str, absent: str = NOT_RUN) -> str:
     if not row["seeds"]:
-        return NOT_RUN
+        return absent
     return estimate(row[f"{metric}/point"], row[f"{metric}/low"], row[f"{metric}/high"], int(row["seeds"]), metric)
 
 
@@ -178,7 +178,9 @@ def _beating_text(model: str, row: dict[str, object], words: pd.Series) -> str:
     return str(words[model])
 
 
-def _table(r: Rung) -> list[list[str]]:
+def _table(r: Rung, going: set[tuple[str, str]] | frozenset[tuple[str, str]] = frozenset()) -> list[list[str]]:
+    """The rung's table, a row per method; a method with no seed tested reads "under way" in its cells where
+    `going` (`under_way`) holds it on this rung, else "not run"."""
     head = ["Method", "Seeds", f"Return, scenario {HEADLINE_SCENARIO}",
             f"{METRIC_LABELS['collisions']}, scenario {HEADLINE_SCENARIO}",
             f"Speed (km/h), lane changes, scenario {HEADLINE_SCENARIO}",
@@ -186,10 +188,12 @@ def _table(r: Rung) -> list[list[str]]:
     rows = [head]
     for _, row in method_rows(r).iterrows():
         name = model_label(row["model"], short=True) + (" (every rung)" if row["model"] == REFERENCE else "")
+        absent = UNDER_WAY if (r.name, row["model"]) in going else NOT_RUN
         driving = (f"{fmt(row['avg_speed_kmh'], 'avg_speed_kmh')}, {fmt(row['lane_changes'], 'lane_changes')}"
-                   if row["seeds"] else NOT_RUN)
-        rows.append([name, str(row["seeds"]), _cell(row, "episode_return"), _cell(row, "collisions"), driving,
-                     row["beating_text"], _hours(row)])
+                   if row["seeds"] else absent)
+        beating = absent if row["beating_text"] == NOT_RUN else row["beating_text"]
+        rows.append([name, str(row["seeds"]), _cell(row, "episode_return", absent),
+                     _cell(row, "collisions", absent), driving, beating, _hours(row)])
     return rows
 
 
@@ -388,14 +392,16 @@ def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int,
         rows = above[above["rung"] == name]
         label = RUNGS[name][0].upper() + RUNGS[name][1:]
         if not rows["seeds"].any():
-            lines.append(f"{label}: {NOT_RUN} yet (scale ladder).")
+            started = [model_label(m, short=True) for m in rows["model"] if (name, m) in going]
+            lines.append(f"{label}: {listed(started)} {UNDER_WAY}, no seed tested yet (scale ladder)." if started
+                         else f"{label}: {NOT_RUN} yet (scale ladder).")
             continue
         tested = [_method_words(row, expected) for _, row in rows.iterrows() if row["seeds"]]
         untested = [str(m) for m in rows.loc[rows["seeds"] == 0, "model"]]
         started = [model_label(m, short=True) for m in untested if (name, m) in going]
         missing = [model_label(m, short=True) for m in untested if (name, m) not in going]
         lines.append(f"{label}, scenario {HEADLINE_SCENARIO} (scale ladder): " + "; ".join(tested)
-                     + (f"; {listed(started)} under way, no seed tested yet" if started else "")
+                     + (f"; {listed(started)} {UNDER_WAY}, no seed tested yet" if started else "")
                      + (f"; {listed(missing)} {NOT_RUN}" if missing else "") + ".")
     return lines
 
@@ -446,10 +452,11 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
                                  "host's mean and interval as the dashed line and grey band. n: the seeds tested.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
-            out.para(f"Rung {i}, {r.name}: {r.label}: {NOT_RUN}. {progress_text(states[r.name])}")
+            state = UNDER_WAY if any(rung == r.name for rung, _ in going) else NOT_RUN
+            out.para(f"Rung {i}, {r.name}: {r.label}: {state}. {progress_text(states[r.name])}")
             continue
         out.para(f"Rung {i}, {r.name}: {r.label}. {progress_text(states[r.name])}")
-        out.table(_table(r), widths=[1.15, 0.55, 1.4, 1.4, 0.95, 1.25, 0.9])
+        out.table(_table(r, going), widths=[1.15, 0.55, 1.4, 1.4, 0.95, 1.25, 0.9])
     shifts = against_base(ladder)
     if not shifts.empty:
         out.para(f"What each higher rung changes against the {BASE} rung, method by method: the rung's scenario-"

@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     from analysis.ladder import Rung
 
 METRICS = ("episode_return", "collisions")
+NOT_RUN = "not run"
+UNDER_WAY = "under way"  # a method with no seed tested on a rung whose training there was stopped part-way
 WIDTH = 0.22  # the distance between two methods' columns within a rung
 
 
@@ -70,7 +72,7 @@ def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str,
                 at = x + (k - (len(LEARNED) - 1) / 2) * WIDTH
                 row = rows.loc[model] if model in rows.index else None
                 if row is None or not row["seeds"]:
-                    mark = "under way" if (r.name, model) in under_way else "not run"
+                    mark = UNDER_WAY if (r.name, model) in under_way else NOT_RUN
                     ax.text(at, 0.02, mark, rotation=90, ha="center", va="bottom", fontsize=7, color="0.45",
                             transform=ax.get_xaxis_transform())
                     continue

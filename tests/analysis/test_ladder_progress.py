@@ -185,7 +185,33 @@ def test_a_method_whose_only_training_is_stopped_reads_under_way_in_the_figure(
         return fig
 
     monkeypatch.setattr(ladder_figure, "draw", keep_marks)
-    ladder.section(evals, curves, episodes, None, stopped, out_dir=tmp_path)
+    section, numbers, _, states, _ = ladder.section(evals, curves, episodes, None, stopped, out_dir=tmp_path)
     (panels,) = drawn
     for marks in panels:  # the steps rung: Min under way, Coordinate not run; the pixels rung: all three not run
         assert marks.count("under way") == 1 and marks.count("not run") == 1 + len(LEARNED)
+    # The steps rung's table says the same in every cell of the two untested rows.
+    tables = [b.rows for b in section.blocks if b.rows is not None]
+    steps = next(t for t in tables if any(row[0] == "Proposed" and row[1] == "1" for row in t))
+    rows = {row[0]: row for row in steps[1:]}
+    assert rows["Min"][2:6] == ["under way"] * 4 and rows["Coordinate"][2:6] == ["not run"] * 4
+    assert rows["Proposed"][2] not in ("under way", "not run")
+
+
+def test_page_one_says_under_way_for_a_rung_with_a_stopped_training_and_no_seed_tested() -> None:
+    evals, curves, episodes, stopped = rung_data()
+    evals = with_cv_ratio(evals, pd.DataFrame())
+    # Nothing tested at the paper's steps; the proposed host's seed 1 stopped there. The pixels rung has one seed
+    # tested, so page 1 speaks of the rungs above the main pages'.
+    steps_keys = evals["experiment"] == "paper_steps"
+    pixels = evals[steps_keys].assign(experiment="paper_pixels")
+    evals = pd.concat([evals[~steps_keys], pixels], ignore_index=True)
+    section, numbers, _, states, _ = ladder.section(evals, curves, episodes, None, stopped)
+    going = ladder.under_way(states)
+    assert going == {("paper_steps", "proposed")}
+    lines = ladder.page_one_lines(numbers, {"quick"}, 3, going)
+    assert "The paper's steps (1M steps, Table 4's learner, 36x36x2): Proposed under way, no seed tested yet " \
+           "(scale ladder)." in lines
+    assert ladder.page_one_lines(numbers, {"quick"}, 3)[0].endswith(": not run yet (scale ladder).")
+    paras = [b.text for b in section.blocks if b.rows is None]
+    assert any(p.startswith("Rung 2, paper_steps: the paper's steps (1M steps, Table 4's learner, 36x36x2): "
+                            "under way. Trainings: Proposed: seed 1 stopped") for p in paras)
