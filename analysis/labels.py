@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from decimal import ROUND_HALF_UP, Decimal
 
 import pandas as pd
 
@@ -109,7 +110,14 @@ def fmt(value: float, metric: str = "", digits: int | None = None) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "n/a"
     d = METRIC_DIGITS.get(metric, 2) if digits is None else digits
-    return f"{value:.{d}f}"
+    if not math.isfinite(value):
+        return f"{value:.{d}f}"
+    # Half rounds away from zero, on the value cut to the digits a float32 holds: the same mean reached through
+    # float32 metrics (0.62500006) and through float64 (0.625) then prints alike, where plain formatting gives
+    # 0.63 and 0.62.
+    whole = len(str(int(abs(value))))
+    kept = Decimal(f"{value:.{max(6, whole + d)}g}")
+    return f"{kept.quantize(Decimal(1).scaleb(-d), rounding=ROUND_HALF_UP):f}"
 
 
 # What the simulator's parameters mean and their units (conf/simulator/highway.yaml), for the

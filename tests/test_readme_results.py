@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from analysis.claims import NOT_SUPPORTED, SUPPORTED, TIE, VERDICTS
+from analysis.labels import fmt
 from analysis.load import at_main_experiments
 from analysis.stats import difference_ci
 from analysis.tables import headline, per_scenario
@@ -46,9 +47,10 @@ def _evals() -> pd.DataFrame:
 
 
 def _same_to_the_printed_digit(shown: str, exact: float) -> bool:
-    """`shown` is `exact` written with as many decimals as `shown` has (a sign and -0 aside)."""
+    """`shown` is `exact` written, as the report writes numbers (`fmt`), with as many decimals as `shown` has (a
+    sign and -0 aside)."""
     decimals = len(shown.split(".", 1)[1]) if "." in shown else 0
-    return float(shown) == float(f"{exact:.{decimals}f}")
+    return float(shown) == float(fmt(exact, digits=decimals))
 
 
 def _table(section: str) -> dict[str, list[str]]:
