@@ -12,7 +12,7 @@ import pytest
 from analysis import crashes, equal_terms
 from analysis.bundle import load_bundle, write_bundle
 from analysis.claims import evaluate_claims
-from analysis.labels import GUARDED, model_label
+from analysis.labels import GUARDED, fmt, model_label
 from analysis.load import load_store
 from analysis.pipeline import build_outputs
 from analysis.synthetic import SyntheticSpec, synthetic_frames, write_store
@@ -105,8 +105,8 @@ def test_the_mark_sentence_states_the_guarded_return_against_idm_mobil():
     evals, _, _ = synthetic_frames(guarded_spec())
     three = evals[evals["scenario"] == "3"].groupby("model")["episode_return"].mean()
     text = equal_terms.mark_sentence(evals)
-    assert f"earns {three['proposed_guarded']:.1f} per episode" in text
-    assert f"against {three['idm_mobil']:.1f} for IDM + MOBIL" in text
+    assert f"earns {fmt(three['proposed_guarded'], digits=1)} per episode" in text
+    assert f"against {fmt(three['idm_mobil'], digits=1)} for IDM + MOBIL" in text
     share = (three["proposed_guarded"] - three["human"]) / (three["idm_mobil"] - three["human"])
     assert f"covers {share:.0%} of the way" in text
     no_mark = evals[evals["model"] != "idm_mobil"]

@@ -123,7 +123,7 @@ def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -
             # How it drives: the mean over seeds of each seed's scenario-3 speed and lane changes.
             mine = evals[(evals["model"] == model) & (evals["experiment"] == experiment) & (evals["scenario"] == "3")]
             per_seed = mine.groupby("seed")[["avg_speed_kmh", "lane_changes"]].mean().mean()
-            assert row[4] == f"{per_seed['avg_speed_kmh']:.1f}, {per_seed['lane_changes']:.2f}"
+            assert row[4] == f"{fmt(per_seed['avg_speed_kmh'], digits=1)}, {fmt(per_seed['lane_changes'], digits=2)}"
         # The human-driven host's runs stand beside every rung, and every seed is paired with them.
         assert table[4][2] == cell(evals, "human", "quick", "episode_return")
         assert table[1][5].startswith(f"{len(SEEDS)} of {len(SEEDS)}")
