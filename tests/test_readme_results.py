@@ -20,7 +20,7 @@ README = REPO_ROOT / "README.md"
 BUNDLE = REPO_ROOT / "docs" / "results"
 SCENARIOS = ["1", "2", "3", "4", "5"]
 # The README table's row labels and the models they stand for.
-ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (camera + V2X list)": "coordinate",
+ROWS = {"Proposed (HGM + camera)": "proposed", "Min (camera)": "min", "Coordinate (V2X vector + camera)": "coordinate",
         "Variant: enriched HGM, 160k steps": "proposed_enriched",
         "Guarded proposed (not the paper's)": "proposed_guarded", "Guarded Min (not the paper's)": "min_guarded",
         "Guarded Coordinate (not the paper's)": "coordinate_guarded",
