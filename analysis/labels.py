@@ -105,6 +105,12 @@ def ordered_scenarios(scenarios: object) -> list[str]:
     return known + sorted(present - set(known))
 
 
+# What a table or figure says where a method has no seed tested: under way while one of its trainings is stopped
+# part-way (it resumes), else not run.
+NOT_RUN = "not run"
+UNDER_WAY = "under way"
+
+
 def fmt(value: float, metric: str = "", digits: int | None = None) -> str:
     """The one number format used everywhere (tables, claims, tests compare against it)."""
     if value is None or (isinstance(value, float) and math.isnan(value)):

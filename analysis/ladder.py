@@ -21,8 +21,7 @@ import pandas as pd
 from analysis import ladder_figure
 from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
 from analysis.costs import hours_trained
-from analysis.labels import LEARNED, METRIC_LABELS, fmt, listed, model_label
-from analysis.ladder_figure import NOT_RUN, UNDER_WAY
+from analysis.labels import LEARNED, METRIC_LABELS, NOT_RUN, UNDER_WAY, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
 from analysis.sections import Section

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 
 from analysis.figures import save, use_style
-from analysis.labels import LEARNED, METRIC_LABELS, PALETTE, model_label
+from analysis.labels import LEARNED, METRIC_LABELS, NOT_RUN, PALETTE, UNDER_WAY, model_label
 from analysis.stats import COVERAGE_SEEDS
 from analysis.tables import HEADLINE_SCENARIO, per_scenario
 
@@ -27,8 +27,6 @@ if TYPE_CHECKING:
     from analysis.ladder import Rung
 
 METRICS = ("episode_return", "collisions")
-NOT_RUN = "not run"
-UNDER_WAY = "under way"  # a method with no seed tested on a rung whose training there was stopped part-way
 WIDTH = 0.22  # the distance between two methods' columns within a rung
 
 
