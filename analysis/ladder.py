@@ -19,11 +19,12 @@ from pathlib import Path
 import pandas as pd
 
 from analysis import ladder_figure
-from analysis.claims import CLAIMS, ClaimResult, evaluate_claims
+from analysis.claims import CLAIMS
 from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, NOT_RUN, UNDER_WAY, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
+from analysis.rung import Rung
 from analysis.sections import Section
 from analysis.stats import COVERAGE_SEEDS, difference_ci
 from analysis.tables import (
@@ -51,25 +52,6 @@ DRIVING = ("avg_speed_kmh", "lane_changes")
 FIGURE = "fig_scale_ladder"
 BASE = "quick"  # the lowest rung: each higher rung is read against it, seed by seed
 SHIFT_METRICS = (*HEADLINE_METRICS, *DRIVING)
-
-
-@dataclasses.dataclass
-class Rung:
-    """One rung's runs: the learned methods' of its preset, the human-driven host's, and their curves."""
-
-    name: str
-    label: str
-    evals: pd.DataFrame
-    curves: pd.DataFrame
-    episodes: pd.DataFrame
-    runs: pd.DataFrame | None = None
-
-    @property
-    def ran(self) -> bool:
-        return bool(self.evals["model"].isin(LEARNED).any())
-
-    def claims(self) -> list[ClaimResult]:
-        return evaluate_claims(self.evals, self.curves)
 
 
 def _reference_rows(evals: pd.DataFrame, rung: str) -> pd.DataFrame:

@@ -12,7 +12,6 @@ run yet is left empty and says so, so that a gap is never read as a zero.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -20,11 +19,9 @@ import pandas as pd
 
 from analysis.figures import save, use_style
 from analysis.labels import LEARNED, METRIC_LABELS, NOT_RUN, PALETTE, UNDER_WAY, model_label
+from analysis.rung import Rung
 from analysis.stats import COVERAGE_SEEDS
 from analysis.tables import HEADLINE_SCENARIO, per_scenario
-
-if TYPE_CHECKING:
-    from analysis.ladder import Rung
 
 METRICS = ("episode_return", "collisions")
 WIDTH = 0.22  # the distance between two methods' columns within a rung
@@ -38,7 +35,7 @@ def _tick(name: str, label: str) -> str:
 
 def figure(rungs: list[Rung], numbers: pd.DataFrame, reference: str, stem: Path,
            under_way: set[tuple[str, str]] | frozenset[tuple[str, str]] = frozenset()) -> dict[str, Path] | None:
-    """`rungs` (`analysis.ladder.Rung`, lowest first) and their `numbers` (`method_rows` of each, with `rung`;
+    """`rungs` (lowest first) and their `numbers` (`method_rows` of each, with `rung`;
     `reference` the host that does not train; `under_way` the (rung, model) pairs with a stopped training): the
     ladder figure saved under `stem`, or None while no rung has a learned host's run."""
     if not any(r.ran for r in rungs):

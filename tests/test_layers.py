@@ -41,9 +41,12 @@ def _imports(path: Path, module: str, package: str) -> set[str]:
         elif isinstance(node, ast.ImportFrom):
             if node.level:
                 base = here[: len(here) - node.level + 1]
-                names = [".".join(base + ([node.module] if node.module else []))]
+                source = ".".join(base + ([node.module] if node.module else []))
             else:
-                names = [node.module or ""]
+                source = node.module or ""
+            # `from pkg import mod` imports the module `pkg.mod` too: name it, so that a loop through it shows.
+            # A name that is no module (`from pkg import some_function`) is dropped by `import_graph`.
+            names = [source, *(f"{source}.{alias.name}" for alias in node.names)]
         else:
             continue
         found |= {name for name in names if name == package or name.startswith(package + ".")}
@@ -51,8 +54,12 @@ def _imports(path: Path, module: str, package: str) -> set[str]:
 
 
 def import_graph(root: Path, package: str) -> dict[str, set[str]]:
-    return {_module_name(p, root): _imports(p, _module_name(p, root), package)
-            for p in sorted((root / package.replace(".", "/")).rglob("*.py"))}
+    """Each module of `package` under `root` and the modules of `package` it imports."""
+    paths = sorted((root / package.replace(".", "/")).rglob("*.py"))
+    modules = {_module_name(p, root) for p in paths}
+    return {_module_name(p, root): {name for name in _imports(p, _module_name(p, root), package)
+                                    if name in modules or name == package}
+            for p in paths}
 
 
 def floor(module: str) -> int:
@@ -100,9 +107,11 @@ def test_the_graph_reader_sees_local_and_relative_imports(tmp_path):
     (tmp_path / "pkg" / "low" / "__init__.py").write_text("")
     (tmp_path / "pkg" / "low" / "a.py").write_text("def f():\n    from ..high import b\n")
     (tmp_path / "pkg" / "high.py").write_text("from .low import a\n")
+    (tmp_path / "pkg" / "side.py").write_text("from pkg import high, low\nfrom pkg.low import a, f\n")
     graph = import_graph(tmp_path, "pkg")
     assert graph["pkg.low.a"] == {"pkg.high"}
-    assert graph["pkg.high"] == {"pkg.low"}
+    assert graph["pkg.high"] == {"pkg.low", "pkg.low.a"}
+    assert graph["pkg.side"] == {"pkg", "pkg.high", "pkg.low", "pkg.low.a"}  # `f` is no module: no edge
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
