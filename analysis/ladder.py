@@ -287,16 +287,28 @@ def hours_per_training(states: pd.DataFrame) -> float:
     return float(whole.mean()) if len(whole) else float("nan")
 
 
+def method_hours(states: pd.DataFrame) -> dict[str, float]:
+    """Per method of `states`: what one of its trainings takes on the rung, by `hours_per_training` over its own
+    trainings, else over the whole rung's (methods differ: Coordinate's network is not the proposed host's)."""
+    rung = hours_per_training(states)
+    out = {}
+    for model, group in states.groupby("model", sort=False):
+        own = hours_per_training(group)
+        out[str(model)] = rung if pd.isna(own) else own
+    return out
+
+
 def hours_left(states: pd.DataFrame) -> float:
     """Hours of training the rung still needs: each stopped training's remaining steps at the rate it logged
-    last (a whole training where that is unknown), and a whole training (`hours_per_training`) per missing one;
-    NaN when nothing on the rung was measured yet."""
-    per_training = hours_per_training(states)
+    last (a whole training where that is unknown), and a whole training of its method (`method_hours`) per
+    missing one; NaN when nothing on the rung was measured yet."""
+    per_method = method_hours(states)
     rest = 0.0
-    for _, row in states[states["state"] == STOPPED].iterrows():
-        own = _rest(row)
+    for _, row in states[states["state"] != TESTED].iterrows():
+        per_training = per_method[str(row["model"])]
+        own = _rest(row) if row["state"] == STOPPED else float("nan")
         rest += per_training if pd.isna(own) else own
-    return rest + per_training * int((states["state"] == MISSING).sum())
+    return rest
 
 
 def _seed_list(seeds: list[object]) -> str:
@@ -332,12 +344,14 @@ def progress_text(states: pd.DataFrame) -> str:
     text = "Trainings: " + ". ".join(parts) + "."
     if (states["state"] == TESTED).all():
         return text
-    per_training, left = hours_per_training(states), hours_left(states)
-    if pd.isna(per_training):
+    if pd.isna(hours_per_training(states)):
         return text + " Left: every training; none has logged its rate yet, so the hours are not measured here."
-    return (text + f" Left: about {left:.0f} CPU-hours of training, at the {per_training:.1f} CPU-hours one "
-            "training takes as measured on this rung (its tested trainings, else a stopped one's hours so far and "
-            "the rest of its steps at the rate it logged last), and the tests.")
+    per_method = method_hours(states)
+    waiting = states.loc[states["state"] != TESTED, "model"].drop_duplicates()
+    each = listed([f"{model_label(str(m), short=True)} {per_method[str(m)]:.1f}" for m in waiting])
+    return (text + f" Left: about {hours_left(states):.0f} CPU-hours of training, at what one training takes as "
+            f"measured on this rung: {each} CPU-hours (the method's tested trainings, else a stopped one's hours "
+            "so far and the rest of its steps at the rate it logged last, else the rung's), and the tests.")
 
 
 def _method_words(row: pd.Series, expected: int) -> str:

@@ -140,8 +140,9 @@ def test_the_ladder_says_what_is_tested_stopped_and_missing_and_the_hours_left()
     text = next(p for p in paras if p.startswith("Rung 2, paper_steps"))
     assert ("Trainings: Proposed: seed 0 tested; seed 1 stopped at 250k of 1M steps after 1.00 CPU-hours of "
             "training, resumed 2 times; seed 2 missing. Min: seeds 0, 1 and 2 missing. Coordinate: seeds 0, 1 and 2 "
-            f"missing. Left: about {left:.0f} CPU-hours of training, at the {tested_hours:.1f} CPU-hours one training "
-            "takes") in text
+            f"missing. Left: about {left:.0f} CPU-hours of training, at what one training takes as measured on this "
+            f"rung: Proposed {tested_hours:.1f}, Min {tested_hours:.1f} and Coordinate {tested_hours:.1f} CPU-hours "
+            "(the method's tested trainings") in text
     quick = next(p for p in paras if p.startswith("Rung 1, quick"))
     assert quick.endswith("Coordinate: seeds 0, 1 and 2 tested.") and "Left" not in quick
     pixels = next(p for p in paras if p.startswith("Rung 3, paper_pixels"))
@@ -152,12 +153,29 @@ def test_the_ladder_says_what_is_tested_stopped_and_missing_and_the_hours_left()
 def test_a_rung_with_only_stopped_trainings_goes_on_at_their_last_rate() -> None:
     # The first stopped at 250k after 1 hour, last at 100 steps per second: 750k more steps take 2.08 hours.
     # The second logged no rate: it counts as a whole training, as does each missing one.
-    states = pd.DataFrame({"state": ["stopped", "stopped", "missing"], "step": [250_000.0, 0.0, None],
+    states = pd.DataFrame({"model": "proposed", "state": ["stopped", "stopped", "missing"],
+                           "step": [250_000.0, 0.0, None],
                            "total_steps": [1_000_000.0, 1_000_000.0, None], "steps_per_s": [100.0, None, None],
                            "hours": [1.0, 0.0, None]})
     whole = 1.0 + 750_000 / 100 / 3600
     assert ladder.hours_per_training(states) == pytest.approx(whole)
     assert ladder.hours_left(states) == pytest.approx((whole - 1.0) + whole + whole)
+
+
+def test_each_method_s_trainings_left_cost_what_its_own_take() -> None:
+    """The proposed host's tested training took 2 hours, Coordinate's 4: a missing seed of each costs its own
+    method's; Min, with nothing measured on the rung, costs the rung's mean (3)."""
+    states = pd.DataFrame({"model": ["proposed", "proposed", "coordinate", "coordinate", "min"],
+                           "state": ["tested", "missing", "tested", "missing", "missing"],
+                           "step": float("nan"), "total_steps": float("nan"), "steps_per_s": float("nan"),
+                           "hours": [2.0, None, 4.0, None, None], "stops": 0, "seed": [0, 1, 0, 1, 0]})
+    assert ladder.method_hours(states) == pytest.approx({"proposed": 2.0, "coordinate": 4.0, "min": 3.0})
+    assert ladder.hours_left(states) == pytest.approx(2.0 + 4.0 + 3.0)
+    text = ladder.progress_text(states)
+    assert text.endswith("Left: about 9 CPU-hours of training, at what one training takes as measured on this rung: "
+                         "Proposed 2.0, Coordinate 4.0 and Min 3.0 CPU-hours (the method's tested trainings, else a "
+                         "stopped one's hours so far and the rest of its steps at the rate it logged last, else the "
+                         "rung's), and the tests.")
 
 
 def test_cpu_hours_come_from_the_cpu_rate_where_logged_and_the_wall_rate_elsewhere() -> None:
