@@ -133,6 +133,7 @@ LADDER_ROWS = {"proposed, quick": ("quick", "proposed"), "proposed, the paper's 
                "proposed, the paper's pixels": ("paper_pixels", "proposed"), "Min, quick": ("quick", "min"),
                "Min, the paper's steps": ("paper_steps", "min"), "Min, the paper's pixels": ("paper_pixels", "min"),
                "Coordinate, quick": ("quick", "coordinate"),
+               "Coordinate, the paper's steps": ("paper_steps", "coordinate"),
                "Coordinate, the paper's pixels": ("paper_pixels", "coordinate"),
                "human-driven host": ("quick", "human")}
 LADDER_CELL = re.compile(r"^([+-]?\d+(?:\.\d+)?)(?: \[([+-]?\d+(?:\.\d+)?), ([+-]?\d+(?:\.\d+)?)\])?$")
