@@ -24,7 +24,7 @@ from analysis.costs import hours_trained
 from analysis.labels import LEARNED, METRIC_LABELS, NOT_RUN, UNDER_WAY, fmt, listed, model_label
 from analysis.load import StoreData, at_main_experiments, main_experiments, no_stopped
 from analysis.report import fmt_estimate
-from analysis.rung import Rung
+from analysis.rung import Rung, absence
 from analysis.sections import Section
 from analysis.stats import COVERAGE_SEEDS, difference_ci
 from analysis.tables import (
@@ -169,7 +169,7 @@ def _table(r: Rung, going: set[tuple[str, str]] | frozenset[tuple[str, str]] = f
     rows = [head]
     for _, row in method_rows(r).iterrows():
         name = model_label(row["model"], short=True) + (" (every rung)" if row["model"] == REFERENCE else "")
-        absent = UNDER_WAY if (r.name, row["model"]) in going else NOT_RUN
+        absent = absence(r.name, going, row["model"])
         driving = (f"{fmt(row['avg_speed_kmh'], 'avg_speed_kmh')}, {fmt(row['lane_changes'], 'lane_changes')}"
                    if row["seeds"] else absent)
         beating = absent if row["beating_text"] == NOT_RUN else row["beating_text"]
@@ -447,7 +447,7 @@ def section(evals: pd.DataFrame, curves: pd.DataFrame, episodes: pd.DataFrame,
                                  "host's mean and interval as the dashed line and grey band. n: the seeds tested.")
     for i, r in enumerate(ladder, start=1):
         if not r.ran:
-            state = UNDER_WAY if any(rung == r.name for rung, _ in going) else NOT_RUN
+            state = absence(r.name, going)
             out.para(f"Rung {i}, {r.name}: {r.label}: {state}. {progress_text(states[r.name])}")
             continue
         out.para(f"Rung {i}, {r.name}: {r.label}. {progress_text(states[r.name])}")

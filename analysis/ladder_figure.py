@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 
 from analysis.figures import save, use_style
-from analysis.labels import LEARNED, METRIC_LABELS, NOT_RUN, PALETTE, UNDER_WAY, model_label
-from analysis.rung import Rung
+from analysis.labels import LEARNED, METRIC_LABELS, PALETTE, model_label
+from analysis.rung import Rung, absence
 from analysis.stats import COVERAGE_SEEDS
 from analysis.tables import HEADLINE_SCENARIO, per_scenario
 
@@ -67,7 +67,7 @@ def draw(rungs: list[Rung], numbers: pd.DataFrame, reference: str,
                 at = x + (k - (len(LEARNED) - 1) / 2) * WIDTH
                 row = rows.loc[model] if model in rows.index else None
                 if row is None or not row["seeds"]:
-                    mark = UNDER_WAY if (r.name, model) in under_way else NOT_RUN
+                    mark = absence(r.name, under_way, model)
                     ax.text(at, 0.02, mark, rotation=90, ha="center", va="bottom", fontsize=7, color="0.45",
                             transform=ax.get_xaxis_transform())
                     continue

@@ -19,6 +19,7 @@ from analysis.labels import LEARNED, fmt
 from analysis.load import StoreData, load_store
 from analysis.pipeline import build_outputs
 from analysis.report import fmt_estimate
+from analysis.rung import absence
 from analysis.scenarios import with_cv_ratio
 from analysis.stats import COVERAGE_SEEDS, mean_ci
 from analysis.synthetic import SyntheticSpec, synthetic_frames, write_store
@@ -143,6 +144,15 @@ def test_each_rung_is_judged_on_its_own_runs_and_a_missing_one_reads_not_run() -
         "supported", "not supported", "not run"]
     assert set(numbers["rung"]) == set(ladder.RUNGS) and not numbers.loc[numbers["rung"] == "paper_pixels",
                                                                          "ran"].any()
+
+
+def test_a_rung_or_method_with_nothing_tested_reads_under_way_only_where_its_training_started() -> None:
+    going = {("paper_steps", "coordinate"), ("paper_pixels", "min")}
+    assert absence("paper_steps", going, "coordinate") == "under way"
+    assert absence("paper_steps", going, "min") == "not run"  # another method's training on the rung is not its own
+    assert absence("paper_pixels", going, "coordinate") == "not run"  # nor its training on another rung
+    assert absence("paper_steps", going) == "under way"  # the rung as a whole: any method's training
+    assert absence("quick", going) == "not run" and absence("paper_steps", set(), "coordinate") == "not run"
 
 
 def test_the_other_pages_read_one_preset_per_model(tmp_path: Path) -> None:
