@@ -298,11 +298,11 @@ def method_hours(states: pd.DataFrame) -> dict[str, float]:
     return out
 
 
-def hours_left(states: pd.DataFrame) -> float:
+def hours_left(states: pd.DataFrame, per_method: dict[str, float] | None = None) -> float:
     """Hours of training the rung still needs: each stopped training's remaining steps at the rate it logged
-    last (a whole training where that is unknown), and a whole training of its method (`method_hours`) per
-    missing one; NaN when nothing on the rung was measured yet."""
-    per_method = method_hours(states)
+    last (a whole training where that is unknown), and a whole training of its method (`per_method`, by default
+    `method_hours(states)`) per missing one; NaN when nothing on the rung was measured yet."""
+    per_method = method_hours(states) if per_method is None else per_method
     rest = 0.0
     for _, row in states[states["state"] != TESTED].iterrows():
         per_training = per_method[str(row["model"])]
@@ -349,7 +349,8 @@ def progress_text(states: pd.DataFrame) -> str:
     per_method = method_hours(states)
     waiting = states.loc[states["state"] != TESTED, "model"].drop_duplicates()
     each = listed([f"{model_label(str(m), short=True)} {per_method[str(m)]:.1f}" for m in waiting])
-    return (text + f" Left: about {hours_left(states):.0f} CPU-hours of training, at what one training takes as "
+    left = hours_left(states, per_method)
+    return (text + f" Left: about {left:.0f} CPU-hours of training, at what one training takes as "
             f"measured on this rung: {each} CPU-hours (the method's tested trainings, else a stopped one's hours "
             "so far and the rest of its steps at the rate it logged last, else the rung's), and the tests.")
 
