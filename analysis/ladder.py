@@ -356,16 +356,19 @@ def progress_text(states: pd.DataFrame) -> str:
 
 
 def _method_words(row: pd.Series, expected: int) -> str:
-    """'Proposed 80.3 return, 0.640 collisions per episode (2 of 5 seeds, no CI; 0 of 2 beat the human-driven
-    host)' for a method with tests on the rung: an interval from `COVERAGE_SEEDS` seeds only (`estimate`)."""
+    """'Proposed 80.3 return, 0.640 collisions (2 of 5 seeds, no CI; 0 beat the human-driven host)' for a method
+    with tests on the rung, per episode (the rung's line says so once): an interval from `COVERAGE_SEEDS` seeds
+    only (`estimate`). Page 1 has room for few words: the seed count says "of `expected`" only while short of
+    it, and the count beating the human-driven host says "of" only where fewer seeds were paired than tested."""
     n = int(row["seeds"])
     # The seeds are said once, after both numbers.
     return_, collisions = (estimate(row[f"{m}/point"], row[f"{m}/low"], row[f"{m}/high"], n, m)
                            for m in HEADLINE_METRICS)
-    seeds = f"{n} of {expected} seeds" if expected else f"{n} seeds"
-    return (f"{model_label(str(row['model']), short=True)} {return_} return, {collisions} collisions per episode "
-            f"({seeds}{', no CI' if n < COVERAGE_SEEDS else ''}; {row['beating']} of {row['paired_seeds']} beat the "
-            "human-driven host)")
+    seeds = f"{n} of {expected} seeds" if expected and n < expected else f"{n} seeds"
+    paired = int(row["paired_seeds"])
+    beating = f"{row['beating']} of {paired}" if paired != n else f"{row['beating']}"
+    return (f"{model_label(str(row['model']), short=True)} {return_} return, {collisions} collisions "
+            f"({seeds}{', no CI' if n < COVERAGE_SEEDS else ''}; {beating} beat the human-driven host)")
 
 
 def under_way(trainings: pd.DataFrame) -> set[tuple[str, str]]:
@@ -396,7 +399,7 @@ def page_one_lines(numbers: pd.DataFrame, shown: set[str], expected: int,
         untested = [str(m) for m in rows.loc[rows["seeds"] == 0, "model"]]
         started = [model_label(m, short=True) for m in untested if (name, m) in going]
         missing = [model_label(m, short=True) for m in untested if (name, m) not in going]
-        lines.append(f"{label}, scenario {HEADLINE_SCENARIO} (scale ladder): " + "; ".join(tested)
+        lines.append(f"{label}, scenario {HEADLINE_SCENARIO}, per episode (scale ladder): " + "; ".join(tested)
                      + (f"; {listed(started)} {UNDER_WAY}, no seed tested yet" if started else "")
                      + (f"; {listed(missing)} {NOT_RUN}" if missing else "") + ".")
     return lines

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from analysis.report import ReportWriter
 
-LINE = ("The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3 (scale ladder): Proposed 51.6 "
-        "[-312.6, 415.8] return, 0.321 [0.000, 1.000] collisions per episode (2 of 5 seeds; 0 of 2 beat the "
-        "human-driven host); Min and Coordinate not run.")
+LINE = ("The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3, per episode (scale ladder): Proposed "
+        "51.6 return, 0.321 collisions (2 of 5 seeds, no CI; 0 beat the human-driven host); Min 13.5 return, 1.000 "
+        "collisions (2 of 5 seeds, no CI; 0 beat the human-driven host); Coordinate not run.")
 
 
 def _writer_at(y: float) -> ReportWriter:

@@ -171,11 +171,12 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     numbers = ladder.section(evals, data.curves, data.episodes)[1]
     lines = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))
     steps = "; ".join(f"{name} {cell(evals, model, 'paper_steps', 'episode_return')} return, "
-                      f"{cell(evals, model, 'paper_steps', 'collisions')} collisions per episode (5 of 5 seeds; "
-                      f"{beats} of 5 beat the human-driven host)"
+                      f"{cell(evals, model, 'paper_steps', 'collisions')} collisions (5 seeds; "
+                      f"{beats} beat the human-driven host)"
                       for name, model, beats in (("Proposed", "proposed", 5), ("Min", "min", 5),
                                                  ("Coordinate", "coordinate", 5)))
-    assert lines == [f"The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3 (scale ladder): {steps}.",
+    assert lines == [f"The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3, per episode "
+                     f"(scale ladder): {steps}.",
                      "The paper's pixels (160k steps, 84x84x4): not run yet (scale ladder)."]
     # One seed of one method: its numbers stand alone, said once to have no interval.
     one = evals[(evals["experiment"] != "paper_steps") | ((evals["model"] == "proposed") & (evals["seed"] == 0))]
@@ -183,7 +184,7 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     row = numbers[(numbers["rung"] == "paper_steps") & (numbers["model"] == "proposed")].iloc[0]
     first = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))[0]
     assert (f"Proposed {fmt(row['episode_return/point'], 'episode_return')} return, "
-            f"{fmt(row['collisions/point'], 'collisions')} collisions per episode (1 of 5 seeds, no CI; ") in first
+            f"{fmt(row['collisions/point'], 'collisions')} collisions (1 of 5 seeds, no CI; 1 beat") in first
     assert first.endswith("; Min and Coordinate not run.") and "[" not in first
     # A method whose training was stopped part-way, none of its seeds tested, is under way, not "not run".
     going = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS), {("paper_steps", "min")})[0]
@@ -216,8 +217,8 @@ def test_the_report_and_results_md_carry_the_ladder(ladder_report: Path) -> None
     for where in (text, markdown):
         assert "Rung 3, paper_pixels: the paper's pixels (160k steps, 84x84x4): not run." in where
         # Page 1 (and results.md's scale) says what the rung above the main pages' found.
-        assert "The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3 (scale ladder): Proposed" \
-               in where
+        assert ("The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3, per episode (scale ladder): "
+                "Proposed") in where
         assert "Rung 2, paper_steps: the paper's steps (1M steps, Table 4's learner, 36x36x2)." in where
     assert text.index("The paper's steps (1M steps, Table 4's learner, 36x36x2), scenario 3") < text.index(
         "page 2")
