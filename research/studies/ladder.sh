@@ -14,6 +14,11 @@
 #   bash research/studies/ladder.sh paper_pixels 150 model=proposed seed=0,1   # the proposed host's seeds first
 #   LADDER_NICE=19 bash research/studies/ladder.sh paper_pixels 150 seed=0      # only on cores left idle
 #   bash research/studies/ladder.sh paper_steps keep   # only keep the store's state (a sweep stopped otherwise)
+#   bash research/studies/ladder.sh paper_steps extend 15   # the running sweep stops 15 minutes later than set
+#
+# `extend` is for a training that its rate says ends a few minutes after the stop: the later stop saves a resume
+# (a refill of the replay memory) in the next session. The stop is kept in the store (sweep.deadline) while the
+# sweep runs.
 #
 # Without overrides the sweep is the rung's whole row for the proposed host: scenarios 1-5 x seeds 0-4,
 # two jobs at once (seed varies fastest, so the first jobs are the trainings). The rung is published
@@ -29,8 +34,15 @@ case "$rung" in
   paper_steps | paper_pixels) ;;
   *) echo "ladder.sh: rung '${rung}' is not one of: paper_steps paper_pixels" >&2; exit 2 ;;
 esac
-if [ "$minutes" != keep ] && { ! [[ "$minutes" =~ ^[0-9]+$ ]] || [ "$minutes" -lt 1 ]; }; then
-  echo "ladder.sh: MINUTES '${minutes}' must be a whole number of minutes, at least 1 (or 'keep')" >&2
+whole_minutes() { [[ "$1" =~ ^[0-9]+$ ]] && [ "$1" -ge 1 ]; }
+if [ "$minutes" = extend ]; then
+  more=${3:-}
+  if ! whole_minutes "$more"; then
+    echo "ladder.sh: extend '${more}' must be a whole number of minutes, at least 1" >&2
+    exit 2
+  fi
+elif [ "$minutes" != keep ] && ! whole_minutes "$minutes"; then
+  echo "ladder.sh: MINUTES '${minutes}' must be a whole number of minutes, at least 1 (or 'keep' or 'extend')" >&2
   exit 2
 fi
 shift 2
@@ -38,6 +50,22 @@ ROOT=$PWD
 # LADDER_RUNS and LADDER_STATE move the store and the kept state (the script's tests use them).
 STORE=${LADDER_RUNS:-$ROOT/research/studies/runs/ladder}/$rung
 STATE=${LADDER_STATE:-$ROOT/research/studies/ladder_state}/$rung
+# The running sweep's process group and the second (since the epoch) it is stopped at.
+deadline_file=$STORE/sweep.deadline
+
+if [ "$minutes" = extend ]; then
+  read -r group deadline 2>/dev/null <"$deadline_file" || group=
+  if [ -z "$group" ] || ! pgrep -g "$group" >/dev/null; then
+    echo "ladder.sh: no $rung sweep is running (no live sweep in $deadline_file): nothing to extend" >&2
+    exit 2
+  fi
+  deadline=$((deadline + more * 60))
+  # Written whole, then moved in place: the timer never reads half a line.
+  echo "$group $deadline" >"$deadline_file.new" && mv "$deadline_file.new" "$deadline_file"
+  echo "ladder.sh: the $rung sweep now stops at $(date -u -d "@$deadline" '+%H:%M:%S UTC')," \
+    "$(( (deadline - $(date +%s) + 59) / 60 )) minutes from now"
+  exit 0
+fi
 mkdir -p "$STORE"
 
 # Restore: a store that is not here (a new machine, a new session) starts from the committed state.
@@ -128,10 +156,21 @@ if [ -n "${LADDER_NICE:-}" ]; then
       echo "ladder.sh: could not lower the sweep's priority (no /proc/$sweep/autogroup); it runs at full share" >&2
   fi
 fi
-(sleep $((minutes * 60)) && kill -TERM -- "-$sweep") 2>/dev/null &
+started=$(date +%s)
+echo "$sweep $((started + minutes * 60))" >"$deadline_file"
+# The timer sleeps MINUTES, then as long as `extend` has moved the stop, then stops the sweep. A sleep ended by
+# the script (the sweep ended first) ends the timer with it.
+(
+  sleep $((minutes * 60)) || exit 0
+  while left=$(( $(cut -d ' ' -f 2 "$deadline_file") - $(date +%s) )); [ "$left" -gt 0 ]; do
+    sleep "$left" || exit 0
+  done
+  kill -TERM -- "-$sweep"
+) 2>/dev/null &
 timer=$!
 status=0
 wait "$sweep" || status=$?
+ended=$(date +%s)
 # A sweep that ends first stops its timer: the sleep first (killing only the subshell would orphan it for the
 # rest of MINUTES), which ends the subshell before its kill.
 pkill -P "$timer" 2>/dev/null || true
@@ -146,6 +185,8 @@ while pgrep -g "$sweep" >/dev/null; do
   sleep 15
 done
 kill -KILL -- "-$sweep" 2>/dev/null || true
-echo "ladder.sh: the sweep ended with status $status after at most $minutes minutes (log: $STORE/$log)"
+rm -f "$deadline_file"
+echo "ladder.sh: the sweep ended with status $status after $(( (ended - started + 30) / 60 )) minutes" \
+  "(log: $STORE/$log)"
 
 keep

@@ -7,6 +7,7 @@ import os
 import shutil
 import sqlite3
 import subprocess
+import time
 from pathlib import Path
 
 import pytest
@@ -23,6 +24,8 @@ def run(script: str, *args: str, env: dict[str, str] | None = None, timeout: int
     (("paper", "5"), "rung 'paper' is not one of: paper_steps paper_pixels"),
     (("paper_steps", "soon"), "MINUTES 'soon' must be a whole number of minutes"),
     (("paper_steps", "0"), "MINUTES '0' must be a whole number of minutes"),
+    (("paper_steps", "extend", "soon"), "extend 'soon' must be a whole number of minutes, at least 1"),
+    (("paper_steps", "extend"), "extend '' must be a whole number of minutes"),
 ])
 def test_the_ladder_refuses_a_bad_rung_or_time(args, said):
     done = run("ladder.sh", *args)
@@ -37,8 +40,33 @@ def test_a_sweep_that_ends_before_its_time_leaves_no_timer_behind(tmp_path):
         assert done.returncode == 0 and "the sweep ended with status 2 " in done.stdout, done.stderr  # refused
         assert done.stderr == ""  # nor a word from the stopped timer
         assert subprocess.run(timer, capture_output=True).returncode == 1  # no sleep outlives the sweep
+        assert not (tmp_path / "runs" / "paper_steps" / "sweep.deadline").exists()  # nor a stop to extend
     finally:
         subprocess.run(["pkill", "-fx", "sleep 5820"], capture_output=True)
+
+
+def test_extend_moves_a_running_sweeps_stop_and_refuses_without_one(tmp_path):
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    deadline = tmp_path / "runs" / "paper_steps" / "sweep.deadline"
+    nothing = run("ladder.sh", "paper_steps", "extend", "10", env=env)  # no store, no sweep
+    assert nothing.returncode == 2 and "no paper_steps sweep is running" in nothing.stderr
+    assert not deadline.exists()
+    # A sweep's process group, as the script starts one: its own session, still running.
+    sweep = subprocess.Popen(["setsid", "sleep", "300"])
+    try:
+        deadline.parent.mkdir(parents=True)
+        deadline.write_text(f"{sweep.pid} 2000000000\n")
+        done = run("ladder.sh", "paper_steps", "extend", "10", env=env)
+        assert done.returncode == 0, done.stderr
+        assert deadline.read_text() == f"{sweep.pid} {2000000000 + 600}\n"
+        assert "the paper_steps sweep now stops at 03:43:20 UTC" in done.stdout  # 2033-05-18 03:33:20 + 10 min
+    finally:
+        sweep.kill()
+        sweep.wait()
+    # The same file once its sweep has ended (a stopped session's leftover): refused, the stop left as it was.
+    gone = run("ladder.sh", "paper_steps", "extend", "10", env=env)
+    assert gone.returncode == 2 and "no paper_steps sweep is running" in gone.stderr
+    assert deadline.read_text() == f"{sweep.pid} {2000000000 + 600}\n"
 
 
 def test_the_retest_names_the_models_it_knows():
@@ -98,6 +126,32 @@ def test_the_kept_state_leaves_out_a_finished_trainings_large_networks(tmp_path)
     kept = {training: sorted(p.name for p in (trainings / training).iterdir()) for training in sizes}
     assert kept == {"large_finished": ["mlflow_run_id"], "small_finished": ["best.pt", "final.pt", "mlflow_run_id"],
                     "large_unfinished": ["last.pt", "mlflow_run_id"]}
+
+
+@pytest.mark.slow
+def test_an_extended_sweep_is_stopped_at_its_later_time(tmp_path):
+    env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
+    # One training far too long to end in two minutes, so that only the timer ends it.
+    tiny = ("learner.total_steps=400000", "learner.warmup_steps=100", "eval.test_steps=64", "eval.test_envs=4",
+            "seed=0", "scenario='1'", "tracking.log_gif=false")
+    deadline = tmp_path / "runs" / "paper_steps" / "sweep.deadline"
+    sweep = subprocess.Popen(["bash", str(STUDIES / "ladder.sh"), "paper_steps", "1", *tiny], text=True,
+                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, env={**os.environ, **env})
+    try:
+        for _ in range(300):
+            if deadline.exists():
+                break
+            time.sleep(0.1)
+        first_stop = int(deadline.read_text().split()[1])
+        more = run("ladder.sh", "paper_steps", "extend", "1", env=env)
+        assert more.returncode == 0, more.stderr
+        assert int(deadline.read_text().split()[1]) == first_stop + 60
+        out, err = sweep.communicate(timeout=300)
+    finally:
+        sweep.kill()
+    assert sweep.returncode == 0, err
+    assert "ended with status 143 after 2 minutes" in out  # stopped by the later time, not the first
+    assert time.time() >= first_stop + 60 and not deadline.exists()
 
 
 def training_statuses(state: Path) -> list[tuple[str]]:
