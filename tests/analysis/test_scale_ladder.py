@@ -196,6 +196,11 @@ def test_page_one_says_what_the_rungs_above_found_with_their_seed_counts() -> No
     line = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))[0]
     assert "[" not in line and line.count("(3 of 5 seeds, no CI; ") == len(LEARNED)
     assert f"Min {cell(three, 'min', 'paper_steps', 'episode_return')} return" in line
+    # A seed whose human-driven host has no test: the count beating it says how many seeds were paired.
+    unpaired = evals[(evals["model"] != "human") | (evals["seed"] != 4)]
+    numbers = ladder.section(unpaired, data.curves, data.episodes)[1]
+    line = ladder.page_one_lines(numbers, {"quick", "quick160"}, len(SEEDS))[0]
+    assert line.count("(5 seeds; 4 of 4 beat the human-driven host)") == len(LEARNED)
     # Nothing above the shown presets has run: page 1 says nothing of the ladder.
     quick_only = evals[evals["experiment"] != "paper_steps"]
     assert ladder.page_one_lines(ladder.section(quick_only, data.curves, data.episodes)[1], {"quick", "quick160"},
