@@ -27,6 +27,11 @@
 # --no-report` in the store; a rung under way is published the same way: its stopped trainings (stopped.csv)
 # give the report's scale ladder each one's steps and CPU-hours so far, and the hours left.
 set -euo pipefail
+if [ "${1:-}" = -h ] || [ "${1:-}" = --help ]; then
+  # The help is this header: every comment line from the second to the first line of code.
+  sed -n '2,/^[^#]/{/^#/s/^# \{0,1\}//p}' "$0"
+  exit 0
+fi
 cd "$(dirname "$0")/../.."
 rung=${1:-}
 minutes=${2:-}

@@ -32,6 +32,15 @@ def test_the_ladder_refuses_a_bad_rung_or_time(args, said):
     assert done.returncode == 2 and said in done.stderr
 
 
+@pytest.mark.parametrize("flag", ["-h", "--help"])
+def test_the_ladders_help_is_its_header(flag):
+    done = run("ladder.sh", flag)
+    assert done.returncode == 0 and done.stderr == ""
+    assert done.stdout.startswith("One rung of the scale ladder")
+    assert "bash research/studies/ladder.sh paper_steps extend 15" in done.stdout
+    assert "set -euo pipefail" not in done.stdout and "#" not in done.stdout.split("\n", 1)[0]
+
+
 def test_a_sweep_that_ends_before_its_time_leaves_no_timer_behind(tmp_path):
     env = {"LADDER_RUNS": str(tmp_path / "runs"), "LADDER_STATE": str(tmp_path / "state")}
     timer = ["pgrep", "-fx", "sleep 5820"]  # 97 minutes: a number nothing else here sleeps
