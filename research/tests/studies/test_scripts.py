@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import sqlite3
 import subprocess
 import time
@@ -157,10 +158,20 @@ def test_an_extended_sweep_is_stopped_at_its_later_time(tmp_path):
         assert int(deadline.read_text().split()[1]) == first_stop + 60
         out, err = sweep.communicate(timeout=300)
     finally:
-        sweep.kill()
+        if sweep.poll() is None:  # a failed check: stop the training too, not only the script that started it
+            stop_group(deadline)
+            sweep.kill()
     assert sweep.returncode == 0, err
     assert "ended with status 143 after 2 minutes" in out  # stopped by the later time, not the first
     assert time.time() >= first_stop + 60 and not deadline.exists()
+
+
+def stop_group(deadline: Path) -> None:
+    """Kill the sweep's process group named in its stop file (its training runs in a session of its own)."""
+    try:
+        os.killpg(int(deadline.read_text().split()[0]), signal.SIGKILL)
+    except (FileNotFoundError, ValueError, IndexError, ProcessLookupError):
+        pass  # no file, a half-written one, or a group already gone: nothing left to stop
 
 
 def training_statuses(state: Path) -> list[tuple[str]]:
