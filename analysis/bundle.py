@@ -46,7 +46,7 @@ TABLE_FILES: dict[str, tuple[str, str]] = {
                          "config) and metrics.<key> (last values)"),
     "stopped": ("stopped.csv", "trainings a signal stopped before their last step, to be resumed: run_id, model, "
                                "seed, experiment, train_key, step (the last env step logged), total_steps, steps_per_s "
-                               "(the rate logged there, per CPU second where logged), hours (spent training so "
+                               "(the slowest rate it logged, per CPU second where logged), hours (spent training so "
                                "far, CPU hours where logged), stops (times resumed so far)"),
 }
 # Tables a bundle of an earlier version may lack: read as empty.

@@ -47,7 +47,11 @@ def hours_trained(curves: pd.DataFrame, cpu: bool = True) -> pd.Series:
     return pd.Series(hours, dtype=float, name="hours")
 
 
-def last_rate(curves: pd.DataFrame, cpu: bool = True) -> pd.Series:
-    """Per `train_key`, the rate (as `rates` picks it) at its last log point: what the rest of it goes at."""
+def slowest_rate(curves: pd.DataFrame, cpu: bool = True) -> pd.Series:
+    """Per `train_key`, the slowest rate (as `rates` picks it) over its log points: what the rest of it goes at.
+
+    Not the last rate: the points logged while the replay memory fills, at the start and again after each resume,
+    run without updates at several times the pace of the rest, so a training stopped there would look nearly
+    done. The slowest rate errs the other way, by the noise between log points."""
     timed = rates(curves, cpu)
-    return timed.groupby("train_key")["rate"].last() if not timed.empty else pd.Series(dtype=float)
+    return timed.groupby("train_key")["rate"].min() if not timed.empty else pd.Series(dtype=float)

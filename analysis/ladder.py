@@ -269,7 +269,7 @@ def trainings(r: Rung, stopped: pd.DataFrame, seeds: list[object]) -> pd.DataFra
 
 
 def _rest(row: pd.Series) -> float:
-    """Hours a stopped training still needs: its remaining steps at the rate it logged last (NaN if unknown)."""
+    """Hours a stopped training still needs: its remaining steps at the slowest rate it logged (NaN if unknown)."""
     if row["step"] > 0 and pd.notna(row["total_steps"]) and pd.notna(row["steps_per_s"]) and row["steps_per_s"] > 0:
         return max(float(row["total_steps"] - row["step"]), 0.0) / float(row["steps_per_s"]) / 3600
     return float("nan")
@@ -277,7 +277,7 @@ def _rest(row: pd.Series) -> float:
 
 def hours_per_training(states: pd.DataFrame) -> float:
     """What one training of the rung takes, as measured here: the mean of its tested trainings' hours, else of
-    its stopped ones' hours so far plus their remaining steps at the rate each logged last; NaN when neither
+    its stopped ones' hours so far plus their remaining steps at the slowest rate each logged; NaN when neither
     was measured."""
     done = states[(states["state"] == TESTED) & states["hours"].notna()]
     if len(done):
@@ -299,8 +299,8 @@ def method_hours(states: pd.DataFrame) -> dict[str, float]:
 
 
 def hours_left(states: pd.DataFrame, per_method: dict[str, float] | None = None) -> float:
-    """Hours of training the rung still needs: each stopped training's remaining steps at the rate it logged
-    last (a whole training where that is unknown), and a whole training of its method (`per_method`, by default
+    """Hours of training the rung still needs: each stopped training's remaining steps at the slowest rate it
+    logged (a whole training where that is unknown), and a whole training of its method (`per_method`, by default
     `method_hours(states)`) per missing one; NaN when nothing on the rung was measured yet."""
     per_method = method_hours(states) if per_method is None else per_method
     rest = 0.0
@@ -350,9 +350,17 @@ def progress_text(states: pd.DataFrame) -> str:
     waiting = states.loc[states["state"] != TESTED, "model"].drop_duplicates()
     each = listed([f"{model_label(str(m), short=True)} {per_method[str(m)]:.1f}" for m in waiting])
     left = hours_left(states, per_method)
-    return (text + f" Left: about {left:.0f} CPU-hours of training, at what one training takes as "
+    return (text + f" Left: {_about_hours(left)} of training, at what one training takes as "
             f"measured on this rung: {each} CPU-hours (the method's tested trainings, else a stopped one's hours "
-            "so far and the rest of its steps at the rate it logged last, else the rung's), and the tests.")
+            "so far and the rest of its steps at the slowest rate it logged, else the rung's), and the tests.")
+
+
+def _about_hours(hours: float) -> str:
+    """'about 3 CPU-hours', 'about 1 CPU-hour', 'under half a CPU-hour'."""
+    if hours < 0.5:
+        return "under half a CPU-hour"
+    whole = round(hours)
+    return f"about {whole} CPU-hour{'' if whole == 1 else 's'}"
 
 
 def _method_words(row: pd.Series, expected: int) -> str:

@@ -17,7 +17,7 @@ import pandas as pd
 from mlflow import MlflowClient
 from mlflow.entities import ViewType
 
-from analysis.costs import hours_trained, last_rate
+from analysis.costs import hours_trained, slowest_rate
 from hgm_repro.contracts.names import REPORTED_METRICS as EVAL_METRICS  # after the `eval/` prefix, in table order
 from hgm_repro.contracts.names import RUN_TAGS as TAG_COLUMNS
 from hgm_repro.contracts.names import SAFEST_TAGS, current_key
@@ -32,8 +32,8 @@ TOTAL_STEPS_PARAM = "params.learner.total_steps"
 # A training stopped before its last step, by a signal (its run KILLED, its last.pt resumes it), or still
 # running when the store was read: what it
 # reached and what it cost so far (`analysis.costs`: CPU hours where logged). `step`: the last env step it
-# logged; `steps_per_s`: the rate it logged there, per CPU second where logged (what the rest of it would go
-# at); `stops`: its runs' `resumes` tag.
+# logged; `steps_per_s`: the slowest rate it logged, per CPU second where logged (what the rest of it would
+# go at); `stops`: its runs' `resumes` tag.
 STOPPED_COLUMNS = ["run_id", "model", "seed", "experiment", "train_key", "step", "total_steps", "steps_per_s",
                    "hours", "stops"]
 
@@ -362,7 +362,7 @@ def _stopped(client: MlflowClient, runs: pd.DataFrame) -> pd.DataFrame:
         "train_key": under_way["train_key"],
         "step": under_way["train_key"].map(last_step).fillna(0).astype(int),
         "total_steps": _numbers(under_way, TOTAL_STEPS_PARAM).astype(float),
-        "steps_per_s": under_way["train_key"].map(last_rate(curves)).astype(float),
+        "steps_per_s": under_way["train_key"].map(slowest_rate(curves)).astype(float),
         "hours": under_way["train_key"].map(hours).fillna(0.0).astype(float),
         "stops": _numbers(under_way, RESUMES_TAG).fillna(0).astype(int),
     }, columns=STOPPED_COLUMNS)

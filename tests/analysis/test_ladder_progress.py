@@ -16,7 +16,7 @@ from mlflow.entities import Metric, Param
 from analysis import ladder, ladder_figure
 from analysis.bundle import MANIFEST, load_bundle, write_bundle
 from analysis.combine import combine
-from analysis.costs import hours_trained, last_rate
+from analysis.costs import hours_trained, slowest_rate
 from analysis.labels import LEARNED
 from analysis.load import STOPPED_COLUMNS, StoreData, load_store
 from analysis.scenarios import with_cv_ratio
@@ -133,14 +133,15 @@ def test_the_ladder_says_what_is_tested_stopped_and_missing_and_the_hours_left()
     steps_keys = set(evals.loc[evals["experiment"] == "paper_steps", "train_key"])
     tested_hours = ladder.training_costs(curves[curves["train_key"].isin(steps_keys)])["hours"].iloc[0]
     assert step_rows.loc[("proposed", 0), "hours"] == pytest.approx(tested_hours)
-    # Left: the stopped one's 750k steps at its last rate (750k / 250 per s: 0.83 hours), and 7 whole trainings at
-    # the tested one's hours.
+    # Left: the stopped one's 750k steps at its slowest rate (750k / 250 per s: 0.83 hours), and 7 whole trainings
+    # at the tested one's hours (under 0.1 each): about 1 hour.
     left = 750_000 / 250 / 3600 + 7 * tested_hours
     assert ladder.hours_left(states[states["rung"] == "paper_steps"]) == pytest.approx(left)
+    assert 0.5 <= left < 1.5
     text = next(p for p in paras if p.startswith("Rung 2, paper_steps"))
     assert ("Trainings: Proposed: seed 0 tested; seed 1 stopped at 250k of 1M steps after 1.00 CPU-hours of "
             "training, resumed 2 times; seed 2 missing. Min: seeds 0, 1 and 2 missing. Coordinate: seeds 0, 1 and 2 "
-            f"missing. Left: about {left:.0f} CPU-hours of training, at what one training takes as measured on this "
+            "missing. Left: about 1 CPU-hour of training, at what one training takes as measured on this "
             f"rung: Proposed {tested_hours:.1f}, Min {tested_hours:.1f} and Coordinate {tested_hours:.1f} CPU-hours "
             "(the method's tested trainings") in text
     quick = next(p for p in paras if p.startswith("Rung 1, quick"))
@@ -150,8 +151,8 @@ def test_the_ladder_says_what_is_tested_stopped_and_missing_and_the_hours_left()
     assert pixels.endswith("none has logged its rate yet, so the hours are not measured here.")
 
 
-def test_a_rung_with_only_stopped_trainings_goes_on_at_their_last_rate() -> None:
-    # The first stopped at 250k after 1 hour, last at 100 steps per second: 750k more steps take 2.08 hours.
+def test_a_rung_with_only_stopped_trainings_goes_on_at_their_slowest_rate() -> None:
+    # The first stopped at 250k after 1 hour, its slowest rate 100 steps per second: 750k more steps take 2.08 hours.
     # The second logged no rate: it counts as a whole training, as does each missing one.
     states = pd.DataFrame({"model": "proposed", "state": ["stopped", "stopped", "missing"],
                            "step": [250_000.0, 0.0, None],
@@ -174,7 +175,7 @@ def test_each_method_s_trainings_left_cost_what_its_own_take() -> None:
     text = ladder.progress_text(states)
     assert text.endswith("Left: about 9 CPU-hours of training, at what one training takes as measured on this rung: "
                          "Proposed 2.0, Coordinate 4.0 and Min 3.0 CPU-hours (the method's tested trainings, else a "
-                         "stopped one's hours so far and the rest of its steps at the rate it logged last, else the "
+                         "stopped one's hours so far and the rest of its steps at the slowest rate it logged, else the "
                          "rung's), and the tests.")
 
 
@@ -187,7 +188,29 @@ def test_cpu_hours_come_from_the_cpu_rate_where_logged_and_the_wall_rate_elsewhe
                            "step": [3600, 1000, 1000, 2000, 2000], "value": [1.0, 5.0, 10.0, 20.0, 20.0]})
     assert hours_trained(curves).to_dict() == pytest.approx({"old": 1.0, "new": (100 + 50) / 3600})
     assert hours_trained(curves, cpu=False).to_dict() == pytest.approx({"old": 1.0, "new": (200 + 50) / 3600})
-    assert last_rate(curves).to_dict() == {"old": 1.0, "new": 20.0}
+    assert slowest_rate(curves).to_dict() == {"old": 1.0, "new": 10.0}
+
+
+def test_a_training_stopped_just_after_filling_its_replay_goes_on_at_its_update_pace() -> None:
+    """Resumed at 490k, a training logs 1,200 steps per CPU second while it refills the replay memory without
+    updating, then 60 with updates; stopped right after the refill, its rest is not 510k steps at 1,200."""
+    curves = pd.DataFrame({"train_key": "tk", "metric": "cpu_steps_per_s",
+                           "step": [480_000, 490_000, 495_000], "value": [60.0, 62.0, 1_200.0]})
+    assert slowest_rate(curves).to_dict() == {"tk": 60.0}
+    states = pd.DataFrame({"model": "coordinate", "seed": 4, "state": ["stopped"], "step": [495_000.0],
+                           "total_steps": [1_000_000.0], "steps_per_s": slowest_rate(curves).to_list(),
+                           "hours": [2.0], "stops": [1]})
+    assert ladder.hours_left(states) == pytest.approx(505_000 / 60 / 3600)
+    assert "Left: about 2 CPU-hours of training" in ladder.progress_text(states)
+
+
+@pytest.mark.parametrize(("hours", "words"), [(0.2, "under half a CPU-hour"), (0.7, "about 1 CPU-hour"),
+                                              (1.4, "about 1 CPU-hour"), (2.6, "about 3 CPU-hours")])
+def test_the_hours_left_read_in_words_with_the_right_number(hours: float, words: str) -> None:
+    states = pd.DataFrame({"model": "proposed", "seed": 0, "state": ["stopped"], "step": [500_000.0],
+                           "total_steps": [1_000_000.0], "steps_per_s": [500_000 / hours / 3600],
+                           "hours": [1.0], "stops": [0]})
+    assert f"Left: {words} of training," in ladder.progress_text(states)
 
 
 def test_a_method_whose_only_training_is_stopped_reads_under_way_in_the_figure(
