@@ -127,11 +127,13 @@ def episode_means(episodes: pd.DataFrame, prefix: str) -> dict[str, float]:
     return means
 
 
-def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) -> EvaluationResult:
+def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None,
+             host: Callable[[object], Policy] | None = None) -> EvaluationResult:
     """The fair test in `scenario`'s traffic (usually `job.scenario`): each of `eval.test_envs` envs drives the same
     number of complete episodes (`episodes_per_env`, at least `eval.test_steps` decisions in
     all), only complete episodes count, and every model of a seed meets the same traffic
-    (`run_episodes`)."""
+    (`run_episodes`). `host`, given the test env, makes the policy that drives instead of `job.model`'s
+    (a probe's host, tested exactly as a model is)."""
     device = torch.device(job.device)
     if job.runtime.torch_threads > 0:
         torch.set_num_threads(job.runtime.torch_threads)
@@ -142,7 +144,10 @@ def evaluate(job: JobConfig, scenario: ScenarioConfig, checkpoint: Path | None) 
         # The probe: a learned host that trained without the layer, tested under it (validation refuses
         # the option for hosts that have a layer of their own).
         env.simulator.host_safety_layer = True
-    policy = learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
+    if host is not None:
+        policy = host(env)
+    else:
+        policy = learned_policy(job, checkpoint, device) if job.model.learned else _driver_policy(job, env)
     quota = episodes_per_env(job.eval.test_steps, n_envs, env.simulator.config.episode_decisions)
     episodes = run_episodes(env, policy, quota, traffic)
     env.close()

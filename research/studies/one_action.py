@@ -2,8 +2,8 @@
 
 A learned host whose every test return equals, scenario by scenario and seed by seed, what a host that
 always takes one action earns on the same traffic has learned nothing but that action. The test here is
-the app's own: the same envs, the same number of complete episodes and the same traffic per seed
-(`hgm_repro.evaluation.episodes.run_episodes`), with the action fixed instead of chosen.
+the app's own (`hgm_repro.evaluation.episodes.evaluate`): the same envs, the same number of complete
+episodes and the same traffic per seed, with the action fixed instead of chosen.
 
     python research/studies/one_action.py --bundle docs/results --experiment paper_steps \
         --models min coordinate --out research/study/one_action
@@ -15,21 +15,20 @@ difference) and prints the largest difference per model.
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 import pandas as pd
 import torch
-from hydra import compose, initialize_config_dir
 from tensordict import TensorDictBase
 from torch.nn import functional as F
 
-from hgm_repro.contracts.names import EVAL_SEED_OFFSET
-from hgm_repro.contracts.schema import JobConfig, check_config
-from hgm_repro.envs import make_env
-from hgm_repro.evaluation.episodes import Policy, episodes_per_env, run_episodes
+from hgm_repro.contracts.schema import JobConfig
+from hgm_repro.evaluation.episodes import Policy, evaluate
 from hgm_repro.simulator import N_ACTIONS, Action
 
-CONF_DIR = Path(__file__).resolve().parents[2] / "conf"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from plateau import compose_job  # noqa: E402
 
 
 def one_action_policy(action: Action, n_envs: int, device: torch.device) -> Policy:
@@ -44,21 +43,16 @@ def one_action_policy(action: Action, n_envs: int, device: torch.device) -> Poli
 
 def job_for(experiment: str, scenario: int, seed: int, extra: list[str] | None = None) -> JobConfig:
     """The resolved job of a non-learning host in `experiment`'s test set-up (its envs and test budget)."""
-    overrides = [f"experiment={experiment}", f"scenario='{scenario}'", f"seed={seed}", "model=random", *(extra or [])]
-    with initialize_config_dir(str(CONF_DIR), version_base="1.3"):
-        return check_config(compose("config", overrides=overrides))
+    return compose_job([f"experiment={experiment}", f"scenario='{scenario}'", f"seed={seed}", "model=random",
+                        *(extra or [])])
 
 
 def one_action_return(job: JobConfig, action: Action) -> dict[str, float]:
     """Mean test return, collisions and speed per episode of the host taking `action` in every decision, on
     the traffic `job.seed`'s test draws."""
-    device = torch.device(job.device)
-    traffic = job.seed + EVAL_SEED_OFFSET
-    env = make_env(job, job.scenario, n_envs=job.eval.test_envs, seed=traffic)
-    quota = episodes_per_env(job.eval.test_steps, job.eval.test_envs, env.simulator.config.episode_decisions)
-    episodes = run_episodes(env, one_action_policy(action, job.eval.test_envs, device), quota, traffic)
-    env.close()
-    return {k: float(episodes[k].mean()) for k in ("episode_return", "collisions", "avg_speed_kmh")}
+    result = evaluate(job, job.scenario, None,
+                      host=lambda env: one_action_policy(action, env.simulator.n_envs, env.device))
+    return {k: result.means[f"eval/{k}"] for k in ("episode_return", "collisions", "avg_speed_kmh")}
 
 
 def compare(evals: pd.DataFrame, experiment: str, models: list[str], action: Action,

@@ -12,6 +12,7 @@ from hgm_repro.contracts.events import CRASH_KINDS, EPISODE_EVENTS
 from hgm_repro.evaluation import EPISODE_METRICS, evaluate
 from hgm_repro.evaluation.episodes import episodes_per_env
 from hgm_repro.learner import train
+from hgm_repro.simulator import N_ACTIONS, Action
 from tests.helpers.learner import Recorder, compose_job
 
 MEANS = {f"eval/{k}" for k in EPISODE_METRICS}
@@ -57,6 +58,25 @@ def test_human_driven_host_evaluation():
     check_result(result, n_envs=4, per_env=2)
     assert result.means["eval/collisions"] == 0.0  # the human host keeps the NPC safety layer
     assert (result.episodes["decisions"] == 20).all()  # so every episode runs its full length
+
+
+def test_a_host_given_to_the_test_drives_instead_of_the_jobs_model():
+    """The human-driven job, driven by a host that brakes in every decision: the fair test is the same, the
+    driving is the given host's: slower than the human-driven host, and it never changes lane."""
+    job = compose_job("model=human", "eval.test_steps=120")
+    brake = torch.nn.functional.one_hot(torch.full((4,), int(Action.DECELERATE)), N_ACTIONS)
+    seen = []
+
+    def host(env):
+        seen.append(env.simulator.n_envs)
+        return lambda td: td.set("action", brake)
+
+    result = evaluate(job, job.scenario, None, host=host)
+    check_result(result, n_envs=4, per_env=2)
+    assert seen == [4]
+    human = evaluate(job, job.scenario, None)
+    assert result.means["eval/lane_changes"] == 0.0 < human.means["eval/lane_changes"]
+    assert result.means["eval/avg_speed_kmh"] < human.means["eval/avg_speed_kmh"]
 
 
 def test_a_tiny_budget_still_counts_only_complete_episodes():
